@@ -1,0 +1,159 @@
+//! Scene bundle v1: the manifest types (`manifest.json` at the bundle root).
+//!
+//! Everything here is plain serde data. Semantic checks live in `validate.rs`, so
+//! that parsing never fails on a value that is merely wrong: the validator reports
+//! every problem at once, each with the field path it came from.
+
+use serde::{Deserialize, Serialize};
+
+/// The `format` string every bundle carries.
+pub const FORMAT: &str = "rogs-bundle";
+/// The manifest version this build reads and writes.
+pub const VERSION: u32 = 1;
+
+/// A row-major 4×4 rigid transform, `[[r00,r01,r02,tx],[..],[..],[0,0,0,1]]`.
+pub type Mat4Rows = [[f64; 4]; 4];
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    pub format: String,
+    pub version: u32,
+    /// Free text shown in summaries.
+    #[serde(default)]
+    pub name: String,
+    /// Height of the vehicle frame's origin above the road surface, in metres
+    /// (0 when the vehicle frame sits on the ground, as nuScenes' ego frame does).
+    #[serde(default)]
+    pub vehicle_height_m: f64,
+    pub semantic_classes: Vec<SemanticClass>,
+    pub cameras: Vec<Camera>,
+    pub frames: Vec<Frame>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lidar: Option<LidarSensor>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ground_truth: Option<GroundTruth>,
+}
+
+/// What a class means to the optimiser.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ClassRole {
+    /// Part of the road surface: reconstructed and supervised.
+    Road,
+    /// Excluded from every loss (cars, people, sky, …).
+    Ignore,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SemanticClass {
+    /// The pixel value in label images.
+    pub id: u8,
+    pub name: String,
+    /// Display colour, sRGB.
+    pub color: [u8; 3],
+    pub role: ClassRole,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Camera {
+    pub name: String,
+    pub width: u32,
+    pub height: u32,
+    pub fx: f64,
+    pub fy: f64,
+    pub cx: f64,
+    pub cy: f64,
+    /// Camera-to-vehicle transform. Camera axes: x right, y down, z forward.
+    pub camera_to_vehicle: Mat4Rows,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Frame {
+    /// Seconds, increasing.
+    pub timestamp: f64,
+    /// Vehicle-to-world transform (world z up; vehicle x forward, y left, z up).
+    pub vehicle_to_world: Mat4Rows,
+    /// One entry per camera that has an image in this frame.
+    pub views: Vec<View>,
+    /// Path of this frame's LiDAR sweep (needs the top-level `lidar` sensor).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lidar: Option<String>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct View {
+    /// Name of a camera in `cameras`.
+    pub camera: String,
+    /// RGB image (PNG or JPEG), `width × height` of its camera, undistorted.
+    pub image: String,
+    /// 8-bit PNG of class ids, same size as the image.
+    pub label: String,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LidarSensor {
+    /// Float32 values per point: 3 (x, y, z) or 4 (x, y, z, intensity).
+    pub floats_per_point: u32,
+    /// LiDAR-to-vehicle transform.
+    pub lidar_to_vehicle: Mat4Rows,
+}
+
+/// Bird's-eye-view truth rasters. Row 0 is the north edge (largest y), column 0 the
+/// west edge (smallest x): pixel (col, row) has its centre at
+/// `x = origin[0] + (col + 0.5)·resolution`, `y = origin[1] − (row + 0.5)·resolution`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GroundTruth {
+    /// World x of the raster's west edge, world y of its north edge (metres).
+    pub origin: [f64; 2],
+    /// Metres per pixel.
+    pub resolution: f64,
+    pub width: u32,
+    pub height: u32,
+    /// RGB PNG.
+    pub rgb: String,
+    /// 8-bit PNG of class ids.
+    pub class_ids: String,
+    /// Raw little-endian float32 elevation, `width × height` values, row-major.
+    pub elevation: String,
+    /// 8-bit PNG, non-zero where the truth is valid.
+    pub valid: String,
+}
+
+impl Manifest {
+    /// Every file path the manifest references, with the field it came from.
+    pub fn referenced_files(&self) -> Vec<(String, &str)> {
+        let mut out = Vec::new();
+        for (fi, f) in self.frames.iter().enumerate() {
+            for (vi, v) in f.views.iter().enumerate() {
+                out.push((format!("frames[{fi}].views[{vi}].image"), v.image.as_str()));
+                out.push((format!("frames[{fi}].views[{vi}].label"), v.label.as_str()));
+            }
+            if let Some(l) = &f.lidar {
+                out.push((format!("frames[{fi}].lidar"), l.as_str()));
+            }
+        }
+        if let Some(gt) = &self.ground_truth {
+            out.push(("ground_truth.rgb".into(), gt.rgb.as_str()));
+            out.push(("ground_truth.class_ids".into(), gt.class_ids.as_str()));
+            out.push(("ground_truth.elevation".into(), gt.elevation.as_str()));
+            out.push(("ground_truth.valid".into(), gt.valid.as_str()));
+        }
+        out
+    }
+
+    pub fn camera(&self, name: &str) -> Option<&Camera> {
+        self.cameras.iter().find(|c| c.name == name)
+    }
+
+    /// Length of the vehicle path projected on the xy-plane, in metres.
+    pub fn trajectory_length_m(&self) -> f64 {
+        self.frames
+            .windows(2)
+            .map(|w| {
+                let a = &w[0].vehicle_to_world;
+                let b = &w[1].vehicle_to_world;
+                (b[0][3] - a[0][3]).hypot(b[1][3] - a[1][3])
+            })
+            .sum()
+    }
+}

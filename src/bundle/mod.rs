@@ -1,0 +1,149 @@
+//! Scene bundle v1: the input of every reconstruction (see docs/BUNDLE.md).
+//!
+//! `Bundle::from_zip_bytes` works everywhere (the page hands us the dropped file's
+//! bytes); `Bundle::open` natively also takes a folder. Opening validates the whole
+//! bundle, so later stages may rely on every file being present and well formed.
+
+mod error;
+pub mod example;
+mod manifest;
+mod source;
+mod summary;
+mod validate;
+mod write;
+
+pub use error::{BundleErrors, Problem};
+pub use manifest::*;
+pub use source::{is_safe_path, Limits, Source, ZipSource};
+pub use summary::Summary;
+pub use validate::{check_rigid, decode_label, decode_rgb, image_dims, ROTATION_TOLERANCE};
+#[cfg(not(target_arch = "wasm32"))]
+pub use write::write_dir;
+pub use write::{write_zip, BundleFile};
+
+#[cfg(not(target_arch = "wasm32"))]
+pub use source::DirSource;
+
+/// The name of the manifest at the bundle root.
+pub const MANIFEST: &str = "manifest.json";
+
+/// Parses manifest.json, naming the field of a type error (a string where a number
+/// belongs, a missing key, `null` where a number was expected).
+pub fn parse_manifest(text: &[u8]) -> Result<Manifest, Problem> {
+    let de = &mut serde_json::Deserializer::from_slice(text);
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        let field = e.path().to_string();
+        let inner = e.into_inner();
+        if inner.is_syntax() || inner.is_eof() || field == "." {
+            Problem::ManifestSyntax(inner.to_string())
+        } else {
+            Problem::ManifestField {
+                field,
+                what: format!("{inner}"),
+            }
+        }
+    })
+}
+
+/// A validated bundle: its manifest and the files it references.
+pub struct Bundle {
+    pub manifest: Manifest,
+    pub limits: Limits,
+    source: Box<dyn Source>,
+}
+
+impl Bundle {
+    /// Reads and validates a bundle from the bytes of a `.zip`.
+    pub fn from_zip_bytes(bytes: Vec<u8>, limits: Limits) -> Result<Self, BundleErrors> {
+        Self::from_zip_bytes_with_progress(bytes, limits, &mut |_, _| {})
+    }
+
+    pub fn from_zip_bytes_with_progress(
+        bytes: Vec<u8>,
+        limits: Limits,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<Self, BundleErrors> {
+        let source = ZipSource::new(bytes, &limits).map_err(BundleErrors)?;
+        Self::from_source(Box::new(source), limits, progress)
+    }
+
+    /// Reads and validates a bundle from a `.zip` file or a folder (native only).
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn open(
+        path: &std::path::Path,
+        limits: Limits,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<Self, BundleErrors> {
+        if path.is_dir() {
+            let source = DirSource { root: path.into() };
+            return Self::from_source(Box::new(source), limits, progress);
+        }
+        let bytes = std::fs::read(path).map_err(|e| {
+            BundleErrors(vec![Problem::Unreadable {
+                path: path.display().to_string(),
+                reason: e.to_string(),
+            }])
+        })?;
+        Self::from_zip_bytes_with_progress(bytes, limits, progress)
+    }
+
+    /// Parses the manifest and validates every referenced file.
+    pub fn from_source(
+        source: Box<dyn Source>,
+        limits: Limits,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<Self, BundleErrors> {
+        if source.size(MANIFEST).is_none() {
+            return Err(BundleErrors(vec![Problem::MissingManifest]));
+        }
+        let text = source
+            .read(MANIFEST, &limits)
+            .map_err(|p| BundleErrors(vec![p]))?;
+        let manifest = parse_manifest(&text).map_err(|p| BundleErrors(vec![p]))?;
+        let problems = validate::validate(&manifest, source.as_ref(), &limits, progress);
+        if !problems.is_empty() {
+            return Err(BundleErrors(problems));
+        }
+        Ok(Self {
+            manifest,
+            limits,
+            source,
+        })
+    }
+
+    /// Raw bytes of a file in the bundle.
+    pub fn read(&self, path: &str) -> Result<Vec<u8>, Problem> {
+        self.source.read(path, &self.limits)
+    }
+
+    pub fn read_rgb(&self, path: &str) -> Result<image::RgbImage, Problem> {
+        decode_rgb(path, &self.read(path)?, &self.limits)
+    }
+
+    pub fn read_label(&self, path: &str) -> Result<image::GrayImage, Problem> {
+        decode_label(path, &self.read(path)?, &self.limits)
+    }
+
+    /// LiDAR points of a sweep, xyz in the LiDAR frame (intensity dropped).
+    pub fn read_lidar(&self, path: &str) -> Result<Vec<[f32; 3]>, Problem> {
+        let floats = self
+            .manifest
+            .lidar
+            .as_ref()
+            .map_or(3, |l| l.floats_per_point) as usize;
+        let bytes = self.read(path)?;
+        Ok(bytes
+            .chunks_exact(4 * floats)
+            .map(|p| {
+                let f = |i: usize| {
+                    f32::from_le_bytes([p[4 * i], p[4 * i + 1], p[4 * i + 2], p[4 * i + 3]])
+                };
+                [f(0), f(1), f(2)]
+            })
+            .collect())
+    }
+
+    pub fn summary(&self) -> Summary {
+        Summary::of(&self.manifest, self.source.as_ref())
+    }
+}

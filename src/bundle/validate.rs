@@ -1,0 +1,447 @@
+//! Full validation of a bundle before any work starts. It collects every problem
+//! instead of stopping at the first, so one run tells the author all that is wrong.
+
+use super::error::Problem;
+use super::manifest::{Camera, Manifest, Mat4Rows, FORMAT, VERSION};
+use super::source::{is_safe_path, Limits, Source};
+use std::collections::HashSet;
+
+/// Largest tolerated deviation of RᵀR from the identity.
+pub const ROTATION_TOLERANCE: f64 = 1e-3;
+
+/// Checks the manifest against the files in `source`. `progress(done, total)` is
+/// called as files are checked (image decoding dominates the time).
+pub fn validate(
+    m: &Manifest,
+    source: &dyn Source,
+    limits: &Limits,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Vec<Problem> {
+    let mut v = Validator {
+        source,
+        limits,
+        problems: Vec::new(),
+        class_ids: [false; 256],
+    };
+    v.manifest_fields(m);
+    v.files(m, progress);
+    v.problems
+}
+
+struct Validator<'a> {
+    source: &'a dyn Source,
+    limits: &'a Limits,
+    problems: Vec<Problem>,
+    class_ids: [bool; 256],
+}
+
+impl Validator<'_> {
+    fn invalid(&mut self, field: impl Into<String>, what: impl Into<String>) {
+        self.problems.push(Problem::Invalid {
+            field: field.into(),
+            what: what.into(),
+        });
+    }
+
+    fn manifest_fields(&mut self, m: &Manifest) {
+        if m.format != FORMAT {
+            self.problems.push(Problem::Format {
+                found: m.format.clone(),
+            });
+        }
+        if m.version != VERSION {
+            self.problems.push(Problem::Version {
+                found: m.version,
+                supported: VERSION,
+            });
+        }
+        if !m.vehicle_height_m.is_finite() {
+            self.problems.push(Problem::NonFinite {
+                field: "vehicle_height_m".into(),
+            });
+        }
+        self.classes(m);
+        let mut names = HashSet::new();
+        if m.cameras.is_empty() {
+            self.invalid("cameras", "no camera; expected at least one");
+        }
+        for (i, c) in m.cameras.iter().enumerate() {
+            if !names.insert(c.name.as_str()) {
+                self.invalid(
+                    format!("cameras[{i}].name"),
+                    format!("duplicate camera name {:?}", c.name),
+                );
+            }
+            self.camera(i, c);
+        }
+        if let Some(l) = &m.lidar {
+            if !(3..=16).contains(&l.floats_per_point) {
+                self.invalid(
+                    "lidar.floats_per_point",
+                    format!(
+                        "{} is not supported; expected 3 (x,y,z) or 4 (x,y,z,intensity)",
+                        l.floats_per_point
+                    ),
+                );
+            }
+            self.rigid("lidar.lidar_to_vehicle", &l.lidar_to_vehicle);
+        }
+        if m.frames.len() < 2 {
+            self.problems.push(Problem::TooFewFrames {
+                found: m.frames.len(),
+            });
+        }
+        let mut last_t = f64::NEG_INFINITY;
+        for (fi, f) in m.frames.iter().enumerate() {
+            if !f.timestamp.is_finite() {
+                self.problems.push(Problem::NonFinite {
+                    field: format!("frames[{fi}].timestamp"),
+                });
+            } else if f.timestamp < last_t {
+                self.invalid(
+                    format!("frames[{fi}].timestamp"),
+                    "timestamps must not decrease from one frame to the next",
+                );
+            }
+            last_t = f.timestamp;
+            self.rigid(
+                &format!("frames[{fi}].vehicle_to_world"),
+                &f.vehicle_to_world,
+            );
+            if f.views.is_empty() {
+                self.invalid(
+                    format!("frames[{fi}].views"),
+                    "no view; expected at least one camera image per frame",
+                );
+            }
+            let mut seen = HashSet::new();
+            for (vi, view) in f.views.iter().enumerate() {
+                if m.camera(&view.camera).is_none() {
+                    self.invalid(
+                        format!("frames[{fi}].views[{vi}].camera"),
+                        format!(
+                            "unknown camera {:?}; expected one of the names in cameras",
+                            view.camera
+                        ),
+                    );
+                }
+                if !seen.insert(view.camera.as_str()) {
+                    self.invalid(
+                        format!("frames[{fi}].views[{vi}].camera"),
+                        "camera listed twice in one frame",
+                    );
+                }
+            }
+            if f.lidar.is_some() && m.lidar.is_none() {
+                self.invalid(
+                    format!("frames[{fi}].lidar"),
+                    "frame has a LiDAR file but the manifest has no top-level lidar sensor",
+                );
+            }
+        }
+        if let Some(gt) = &m.ground_truth {
+            if !(gt.resolution.is_finite() && gt.resolution > 0.0) {
+                self.invalid(
+                    "ground_truth.resolution",
+                    "expected a positive number of metres per pixel",
+                );
+            }
+            if !gt.origin.iter().all(|v| v.is_finite()) {
+                self.problems.push(Problem::NonFinite {
+                    field: "ground_truth.origin".into(),
+                });
+            }
+            self.dims("ground_truth", gt.width, gt.height);
+        }
+    }
+
+    fn classes(&mut self, m: &Manifest) {
+        let mut names = HashSet::new();
+        if m.semantic_classes.is_empty() {
+            self.invalid(
+                "semantic_classes",
+                "no class; expected at least one class with role \"road\"",
+            );
+        }
+        for (i, c) in m.semantic_classes.iter().enumerate() {
+            if self.class_ids[c.id as usize] {
+                self.invalid(
+                    format!("semantic_classes[{i}].id"),
+                    format!("duplicate class id {}", c.id),
+                );
+            }
+            self.class_ids[c.id as usize] = true;
+            if !names.insert(c.name.as_str()) {
+                self.invalid(
+                    format!("semantic_classes[{i}].name"),
+                    format!("duplicate class name {:?}", c.name),
+                );
+            }
+        }
+        if !m.semantic_classes.is_empty()
+            && !m
+                .semantic_classes
+                .iter()
+                .any(|c| c.role == super::ClassRole::Road)
+        {
+            self.invalid(
+                "semantic_classes",
+                "no class has role \"road\"; nothing would be reconstructed",
+            );
+        }
+    }
+
+    fn dims(&mut self, field: &str, w: u32, h: u32) {
+        if w == 0 || h == 0 || w > self.limits.max_image_side || h > self.limits.max_image_side {
+            self.invalid(
+                format!("{field}.width/height"),
+                format!(
+                    "{w}×{h}; expected 1..={} pixels per side",
+                    self.limits.max_image_side
+                ),
+            );
+        }
+    }
+
+    fn camera(&mut self, i: usize, c: &Camera) {
+        let f = format!("cameras[{i}]");
+        self.dims(&f, c.width, c.height);
+        if ![c.fx, c.fy, c.cx, c.cy].iter().all(|v| v.is_finite()) {
+            self.problems.push(Problem::NonFinite {
+                field: format!("{f}.intrinsics"),
+            });
+        } else if c.fx <= 0.0 || c.fy <= 0.0 {
+            self.invalid(
+                format!("{f}.fx/fy"),
+                "focal lengths must be positive pixels",
+            );
+        }
+        self.rigid(&format!("{f}.camera_to_vehicle"), &c.camera_to_vehicle);
+    }
+
+    fn rigid(&mut self, field: &str, t: &Mat4Rows) {
+        if let Some(p) = check_rigid(field, t) {
+            self.problems.push(p);
+        }
+    }
+
+    fn files(&mut self, m: &Manifest, progress: &mut dyn FnMut(usize, usize)) {
+        let refs = m.referenced_files();
+        let total = refs.len();
+        let mut present = HashSet::new();
+        for (field, path) in &refs {
+            if !is_safe_path(path) {
+                self.problems.push(Problem::UnsafePath {
+                    field: field.clone(),
+                    path: path.to_string(),
+                });
+            } else if self.source.size(path).is_none() {
+                self.problems.push(Problem::MissingFile {
+                    field: field.clone(),
+                    path: path.to_string(),
+                });
+            } else {
+                present.insert(*path);
+            }
+        }
+        let mut done = 0;
+        for f in &m.frames {
+            for v in &f.views {
+                if let Some(cam) = m.camera(&v.camera) {
+                    if present.contains(v.image.as_str()) {
+                        self.image_size(&v.image, &cam.name, cam.width, cam.height);
+                    }
+                    if present.contains(v.label.as_str()) {
+                        self.label(&v.label, &cam.name, cam.width, cam.height);
+                    }
+                }
+                done += 2;
+                progress(done, total);
+            }
+            if let (Some(path), Some(sensor)) = (&f.lidar, &m.lidar) {
+                if let (true, Some(len)) = (present.contains(path.as_str()), self.source.size(path))
+                {
+                    let stride = 4 * sensor.floats_per_point as u64;
+                    if stride > 0 && len % stride != 0 {
+                        self.problems.push(Problem::LidarStride {
+                            path: path.clone(),
+                            len,
+                            stride,
+                            floats: sensor.floats_per_point,
+                        });
+                    }
+                }
+                done += 1;
+            }
+        }
+        if let Some(gt) = &m.ground_truth {
+            let (w, h) = (gt.width, gt.height);
+            for p in [&gt.rgb, &gt.valid] {
+                if present.contains(p.as_str()) {
+                    self.image_size(p, "ground_truth", w, h);
+                }
+            }
+            if present.contains(gt.class_ids.as_str()) {
+                self.label(&gt.class_ids, "ground_truth", w, h);
+            }
+            if let Some(len) = self.source.size(&gt.elevation) {
+                let expected = 4 * w as u64 * h as u64;
+                if len != expected {
+                    self.problems.push(Problem::ElevationSize {
+                        path: gt.elevation.clone(),
+                        len,
+                        expected,
+                    });
+                }
+            }
+        }
+        progress(total, total);
+    }
+
+    /// Reads only the header: dimensions are checked without decoding pixels.
+    fn image_size(&mut self, path: &str, camera: &str, w: u32, h: u32) {
+        let bytes = match self.source.read(path, self.limits) {
+            Ok(b) => b,
+            Err(p) => return self.problems.push(p),
+        };
+        match image_dims(path, &bytes, self.limits) {
+            Ok((fw, fh)) if (fw, fh) != (w, h) => self.problems.push(Problem::ImageSize {
+                path: path.into(),
+                camera: camera.into(),
+                expected_w: w,
+                expected_h: h,
+                found_w: fw,
+                found_h: fh,
+            }),
+            Ok(_) => {}
+            Err(p) => self.problems.push(p),
+        }
+    }
+
+    fn label(&mut self, path: &str, camera: &str, w: u32, h: u32) {
+        let bytes = match self.source.read(path, self.limits) {
+            Ok(b) => b,
+            Err(p) => return self.problems.push(p),
+        };
+        let img = match decode_label(path, &bytes, self.limits) {
+            Ok(i) => i,
+            Err(p) => return self.problems.push(p),
+        };
+        if img.dimensions() != (w, h) {
+            return self.problems.push(Problem::ImageSize {
+                path: path.into(),
+                camera: camera.into(),
+                expected_w: w,
+                expected_h: h,
+                found_w: img.width(),
+                found_h: img.height(),
+            });
+        }
+        let mut first = None;
+        let mut bad = 0u64;
+        for (x, y, p) in img.enumerate_pixels() {
+            if !self.class_ids[p.0[0] as usize] {
+                bad += 1;
+                first.get_or_insert((x, y, p.0[0]));
+            }
+        }
+        if let Some((x, y, value)) = first {
+            self.problems.push(Problem::LabelOutOfRange {
+                path: path.into(),
+                value,
+                x,
+                y,
+                pixels: bad,
+            });
+        }
+    }
+}
+
+/// Checks a 4×4 transform: finite, orthonormal rotation with det +1, last row 0 0 0 1.
+pub fn check_rigid(field: &str, t: &Mat4Rows) -> Option<Problem> {
+    if !t.iter().flatten().all(|v| v.is_finite()) {
+        return Some(Problem::NonFinite {
+            field: field.into(),
+        });
+    }
+    if t[3] != [0.0, 0.0, 0.0, 1.0] {
+        return Some(Problem::NotRigid {
+            field: field.into(),
+        });
+    }
+    let mut deviation: f64 = 0.0;
+    for i in 0..3 {
+        for j in 0..3 {
+            let dot: f64 = (0..3).map(|k| t[k][i] * t[k][j]).sum();
+            deviation = deviation.max((dot - if i == j { 1.0 } else { 0.0 }).abs());
+        }
+    }
+    let r = |i: usize, j: usize| t[i][j];
+    let det = r(0, 0) * (r(1, 1) * r(2, 2) - r(1, 2) * r(2, 1))
+        - r(0, 1) * (r(1, 0) * r(2, 2) - r(1, 2) * r(2, 0))
+        + r(0, 2) * (r(1, 0) * r(2, 1) - r(1, 1) * r(2, 0));
+    if det < 0.0 {
+        deviation = deviation.max(1.0 - det);
+    }
+    (deviation > ROTATION_TOLERANCE).then(|| Problem::NotRotation {
+        field: field.into(),
+        deviation,
+        tolerance: ROTATION_TOLERANCE,
+    })
+}
+
+/// Image dimensions from the header, refusing images past the size limit.
+pub fn image_dims(path: &str, bytes: &[u8], limits: &Limits) -> Result<(u32, u32), Problem> {
+    let decode = |e: image::ImageError| Problem::ImageDecode {
+        path: path.into(),
+        reason: e.to_string(),
+    };
+    let (w, h) = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| Problem::ImageDecode {
+            path: path.into(),
+            reason: e.to_string(),
+        })?
+        .into_dimensions()
+        .map_err(decode)?;
+    if w > limits.max_image_side || h > limits.max_image_side {
+        return Err(Problem::ImageTooLarge {
+            path: path.into(),
+            width: w,
+            height: h,
+            limit: limits.max_image_side,
+        });
+    }
+    Ok((w, h))
+}
+
+/// Decodes an RGB image (PNG or JPEG; grey is widened), after the size check.
+pub fn decode_rgb(path: &str, bytes: &[u8], limits: &Limits) -> Result<image::RgbImage, Problem> {
+    image_dims(path, bytes, limits)?;
+    image::load_from_memory(bytes)
+        .map(|i| i.to_rgb8())
+        .map_err(|e| Problem::ImageDecode {
+            path: path.into(),
+            reason: e.to_string(),
+        })
+}
+
+/// Decodes an 8-bit single-channel label PNG, after the size check.
+pub fn decode_label(
+    path: &str,
+    bytes: &[u8],
+    limits: &Limits,
+) -> Result<image::GrayImage, Problem> {
+    image_dims(path, bytes, limits)?;
+    match image::load_from_memory(bytes) {
+        Ok(image::DynamicImage::ImageLuma8(g)) => Ok(g),
+        Ok(other) => Err(Problem::LabelFormat {
+            path: path.into(),
+            found: format!("{:?}", other.color()),
+        }),
+        Err(e) => Err(Problem::ImageDecode {
+            path: path.into(),
+            reason: e.to_string(),
+        }),
+    }
+}

@@ -1,0 +1,65 @@
+//! The native command line: `rogs <command>`. Each command lives in its own file.
+
+mod example;
+mod gpu;
+mod inspect;
+pub mod progress;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+/// Exit code for input the user must fix (an invalid bundle).
+pub const EXIT_INVALID_INPUT: u8 = 2;
+
+#[derive(Parser)]
+#[command(
+    name = "rogs",
+    version,
+    about = "Road-surface mapping with 2D Gaussian surfels",
+    long_about = "rogs builds bird's-eye-view road maps (RGB, semantics, elevation) from a scene \
+bundle: camera images, semantic masks, poses, intrinsics and optional LiDAR.\n\n\
+A scene bundle is a .zip (or folder) with manifest.json at its root; docs/BUNDLE.md \
+describes the format. GPU work runs through wgpu: set WGPU_BACKEND=vulkan to pick Vulkan \
+(Mesa's lavapipe works without a GPU)."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Validate a scene bundle and print its summary, or every problem found.
+    ///
+    /// Prints cameras, frames, trajectory length, classes, LiDAR points and whether
+    /// ground truth is present. Exits with code 2 when the bundle is invalid, listing
+    /// each problem with the file or manifest field it concerns.
+    Inspect(inspect::Args),
+    /// Report the GPU adapter and run a compute self-test against the CPU.
+    ///
+    /// Shows the adapter name, backend, limits and the gradient-accumulation strategy
+    /// chosen from its features, then checks a scatter-add kernel on the GPU against
+    /// the CPU. Fails with advice on what to install when no adapter is found.
+    Gpu(gpu::Args),
+    /// Write the tiny example bundle (format reference and test fixture).
+    ///
+    /// The example has every optional part (LiDAR, ground truth) with tiny images; it
+    /// shows the format, it is not a road scene.
+    Example(example::Args),
+}
+
+pub fn run() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Inspect(a) => inspect::run(a),
+        Command::Gpu(a) => gpu::run(a),
+        Command::Example(a) => example::run(a),
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

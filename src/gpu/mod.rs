@@ -1,0 +1,205 @@
+//! GPU context: one place that finds an adapter and a device, natively (honouring
+//! `WGPU_BACKEND`) and in the browser (async), and reports what it found.
+//!
+//! The report decides how kernels accumulate gradients: where the adapter has native
+//! `atomic<f32>` add (Vulkan drivers such as lavapipe) we use it; browsers have none,
+//! so there kernels use a compare-and-swap loop on `atomic<u32>` bit patterns.
+
+pub mod readback;
+pub mod scatter_add;
+
+use serde::Serialize;
+use thiserror::Error;
+
+#[derive(Debug, Error)]
+pub enum GpuError {
+    #[error("no GPU adapter found ({0}). {hint}", hint = no_adapter_hint())]
+    NoAdapter(String),
+    #[error("the GPU adapter refused a device ({0}); try updating the graphics driver or browser")]
+    RequestDevice(String),
+    #[error("GPU buffer read-back failed: {0}")]
+    Readback(String),
+    #[error("GPU error: {0}")]
+    Validation(String),
+}
+
+/// What to install or enable when no adapter is found.
+pub fn no_adapter_hint() -> &'static str {
+    if cfg!(target_arch = "wasm32") {
+        "This page needs WebGPU: use a current Chrome, Edge or another Chromium-based browser \
+         (version 113 or newer) with hardware acceleration on; on Linux start Chromium with \
+         --enable-unsafe-webgpu --enable-features=Vulkan; in Firefox Nightly set dom.webgpu.enabled."
+    } else {
+        "Install a Vulkan driver: on a machine without a GPU, Mesa's software driver \
+         (Debian/Ubuntu: `apt-get install mesa-vulkan-drivers libvulkan1`) and run with \
+         WGPU_BACKEND=vulkan; on a machine with a GPU, its vendor's Vulkan driver."
+    }
+}
+
+/// How kernels add floats into shared gradient buffers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AccumStrategy {
+    /// `atomicAdd` on `atomic<f32>` (needs `SHADER_FLOAT32_ATOMIC`; native only).
+    NativeF32,
+    /// Compare-and-swap loop on the `u32` bit pattern of an f32 (works everywhere).
+    CasU32,
+}
+
+impl AccumStrategy {
+    /// WGSL that declares `accum` at `@group(0) @binding(0)` and `fn accum_add(i, v)`.
+    pub fn wgsl(self) -> &'static str {
+        match self {
+            AccumStrategy::NativeF32 => include_str!("../../shaders/accum_f32.wgsl"),
+            AccumStrategy::CasU32 => include_str!("../../shaders/accum_cas.wgsl"),
+        }
+    }
+}
+
+/// The adapter as reported to users and benchmarks.
+#[derive(Clone, Debug, Serialize)]
+pub struct AdapterReport {
+    pub name: String,
+    pub backend: String,
+    pub device_type: String,
+    pub driver: String,
+    pub features: Vec<String>,
+    pub max_storage_buffer_binding_size: u64,
+    pub max_buffer_size: u64,
+    pub max_compute_invocations_per_workgroup: u32,
+    pub max_compute_workgroup_storage_size: u32,
+    pub max_compute_workgroups_per_dimension: u32,
+    pub subgroups: bool,
+    pub timestamps: bool,
+    pub accumulation: AccumStrategy,
+}
+
+impl AdapterReport {
+    pub fn to_text(&self) -> String {
+        format!(
+            "adapter      {} ({}, {}, driver {})\n\
+             storage      {} MiB per binding, {} MiB per buffer\n\
+             workgroups   {} invocations, {} KiB shared, {} per dimension\n\
+             subgroups    {}\ntimestamps   {}\naccumulation {:?}\nfeatures     {}\n",
+            self.name,
+            self.backend,
+            self.device_type,
+            self.driver,
+            self.max_storage_buffer_binding_size >> 20,
+            self.max_buffer_size >> 20,
+            self.max_compute_invocations_per_workgroup,
+            self.max_compute_workgroup_storage_size >> 10,
+            self.max_compute_workgroups_per_dimension,
+            self.subgroups,
+            self.timestamps,
+            self.accumulation,
+            self.features.join(", ")
+        )
+    }
+}
+
+/// Device, queue and what they can do.
+pub struct GpuContext {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub report: AdapterReport,
+    pub features: wgpu::Features,
+    pub limits: wgpu::Limits,
+}
+
+impl GpuContext {
+    /// Finds an adapter (high performance preferred) and opens a device with the
+    /// adapter's own limits and the optional features we can use.
+    pub async fn new() -> Result<Self, GpuError> {
+        #[cfg(not(target_arch = "wasm32"))]
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        #[cfg(target_arch = "wasm32")]
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
+            backends: wgpu::Backends::BROWSER_WEBGPU,
+            ..wgpu::InstanceDescriptor::new_without_display_handle()
+        });
+        let adapter = instance
+            .request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                ..Default::default()
+            })
+            .await
+            .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        let wanted = wgpu::Features::SHADER_FLOAT32_ATOMIC
+            | wgpu::Features::SUBGROUP
+            | wgpu::Features::TIMESTAMP_QUERY;
+        let features = adapter.features() & wanted;
+        let limits = adapter.limits();
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("rogs"),
+                required_features: features,
+                required_limits: limits.clone(),
+                ..Default::default()
+            })
+            .await
+            .map_err(|e| GpuError::RequestDevice(e.to_string()))?;
+        let info = adapter.get_info();
+        let accumulation = if features.contains(wgpu::Features::SHADER_FLOAT32_ATOMIC) {
+            AccumStrategy::NativeF32
+        } else {
+            AccumStrategy::CasU32
+        };
+        let report = AdapterReport {
+            name: info.name.clone(),
+            backend: format!("{:?}", info.backend),
+            device_type: format!("{:?}", info.device_type),
+            driver: format!("{} {}", info.driver, info.driver_info)
+                .trim()
+                .to_string(),
+            features: features.iter_names().map(|(n, _)| n.to_string()).collect(),
+            max_storage_buffer_binding_size: limits.max_storage_buffer_binding_size as u64,
+            max_buffer_size: limits.max_buffer_size,
+            max_compute_invocations_per_workgroup: limits.max_compute_invocations_per_workgroup,
+            max_compute_workgroup_storage_size: limits.max_compute_workgroup_storage_size,
+            max_compute_workgroups_per_dimension: limits.max_compute_workgroups_per_dimension,
+            subgroups: features.contains(wgpu::Features::SUBGROUP),
+            timestamps: features.contains(wgpu::Features::TIMESTAMP_QUERY),
+            accumulation,
+        };
+        Ok(Self {
+            device,
+            queue,
+            report,
+            features,
+            limits,
+        })
+    }
+
+    /// Blocking constructor for the CLI and native tests.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn new_blocking() -> Result<Self, GpuError> {
+        pollster::block_on(Self::new())
+    }
+
+    /// Compiles WGSL made of `parts`, adding the `enable` directives browsers need.
+    pub fn shader(&self, label: &str, parts: &[&str]) -> wgpu::ShaderModule {
+        let mut src = String::new();
+        // naga rejects `enable subgroups;` natively, browsers require it.
+        if cfg!(target_arch = "wasm32") && self.report.subgroups {
+            src.push_str("enable subgroups;\n");
+        }
+        for p in parts {
+            src.push_str(p);
+            src.push('\n');
+        }
+        self.device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(label),
+                source: wgpu::ShaderSource::Wgsl(src.into()),
+            })
+    }
+
+    /// A 2D dispatch size covering `groups` workgroups within the per-dimension limit.
+    pub fn dispatch_2d(&self, groups: u32) -> (u32, u32) {
+        let max = self.limits.max_compute_workgroups_per_dimension.max(1);
+        let x = groups.clamp(1, max);
+        (x, groups.div_ceil(x).max(1))
+    }
+}

@@ -1,0 +1,14 @@
+//! rogs: road-surface mapping with 2D Gaussian surfels on a meshgrid along the
+//! trajectory, optimised by differentiable rendering in WebGPU compute shaders.
+//!
+//! The data path, one module per stage: bundle → grid → init → render → loss →
+//! optim → bev → export (see docs/ARCHITECTURE.md for what exists today).
+
+pub mod bundle;
+pub mod gpu;
+
+#[cfg(not(target_arch = "wasm32"))]
+pub mod cli;
+
+#[cfg(target_arch = "wasm32")]
+pub mod web;

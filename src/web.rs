@@ -1,0 +1,85 @@
+//! The JavaScript API (wasm32 only). Every entry point returns errors as values or
+//! rejected promises with a sentence for the page to show; none may panic.
+
+use crate::bundle::{example, write_zip, Bundle, Limits};
+use crate::gpu::scatter_add::{scatter_add_cpu, scatter_add_gpu};
+use crate::gpu::GpuContext;
+use serde::Serialize;
+use wasm_bindgen::prelude::*;
+
+#[wasm_bindgen(start)]
+pub fn start() {
+    console_error_panic_hook::set_once();
+}
+
+#[wasm_bindgen]
+pub fn version() -> String {
+    env!("CARGO_PKG_VERSION").into()
+}
+
+#[derive(Serialize)]
+struct ProblemJs {
+    location: String,
+    message: String,
+}
+
+#[derive(Serialize)]
+#[serde(tag = "status", rename_all = "lowercase")]
+enum InspectJs {
+    Valid { summary: crate::bundle::Summary },
+    Invalid { problems: Vec<ProblemJs> },
+}
+
+fn to_js<T: Serialize>(v: &T) -> Result<JsValue, JsValue> {
+    serde_wasm_bindgen::to_value(v).map_err(|e| JsValue::from_str(&e.to_string()))
+}
+
+/// Validates the bytes of a bundle `.zip`: `{status: "valid", summary}` or
+/// `{status: "invalid", problems: [{location, message}]}`.
+#[wasm_bindgen]
+pub fn inspect_bundle(bytes: Vec<u8>) -> Result<JsValue, JsValue> {
+    let result = match Bundle::from_zip_bytes(bytes, Limits::default()) {
+        Ok(b) => InspectJs::Valid {
+            summary: b.summary(),
+        },
+        Err(e) => InspectJs::Invalid {
+            problems: e
+                .0
+                .iter()
+                .map(|p| ProblemJs {
+                    location: p.location().to_string(),
+                    message: p.to_string(),
+                })
+                .collect(),
+        },
+    };
+    to_js(&result)
+}
+
+/// The tiny example bundle as `.zip` bytes.
+#[wasm_bindgen]
+pub fn example_bundle() -> Result<Vec<u8>, JsValue> {
+    let (m, files) = example::tiny();
+    write_zip(&m, &files).map_err(|e| JsValue::from_str(&e))
+}
+
+/// Finds the WebGPU adapter, runs the scatter-add self-test against the CPU and
+/// returns the adapter report; rejects with advice when WebGPU is unavailable.
+#[wasm_bindgen]
+pub async fn gpu_info() -> Result<JsValue, JsValue> {
+    let ctx = GpuContext::new()
+        .await
+        .map_err(|e| JsValue::from_str(&e.to_string()))?;
+    let index: Vec<u32> = (0..4096u32).map(|i| i * 31 % 64).collect();
+    let values: Vec<f32> = (0..4096).map(|i| (i % 5) as f32 * 0.5).collect();
+    let gpu = scatter_add_gpu(&ctx, ctx.report.accumulation, 64, &index, &values)
+        .await
+        .map_err(|e| JsValue::from_str(&e.to_string()))?;
+    let cpu = scatter_add_cpu(64, &index, &values);
+    if gpu.iter().zip(&cpu).any(|(a, b)| (a - b).abs() > 1e-3) {
+        return Err(JsValue::from_str(
+            "the GPU self-test gave wrong sums: this browser's WebGPU implementation is not usable",
+        ));
+    }
+    to_js(&ctx.report)
+}

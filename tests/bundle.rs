@@ -1,0 +1,392 @@
+//! Scene bundle v1: round trip, one test per validation-failure class, resource bounds.
+#![cfg(not(target_arch = "wasm32"))]
+
+use rogs::bundle::example::{self, png_gray, png_rgb};
+use rogs::bundle::{write_zip, Bundle, BundleFile, Limits, Manifest, Problem};
+
+fn zip(m: &Manifest, files: &[BundleFile]) -> Vec<u8> {
+    write_zip(m, files).expect("zip writing")
+}
+
+fn open(m: &Manifest, files: &[BundleFile]) -> Result<Bundle, Vec<Problem>> {
+    Bundle::from_zip_bytes(zip(m, files), Limits::default()).map_err(|e| e.0)
+}
+
+/// Opens a bundle that must be invalid and returns its problems.
+fn problems(m: &Manifest, files: &[BundleFile]) -> Vec<Problem> {
+    match open(m, files) {
+        Ok(_) => panic!("bundle was accepted but should be invalid"),
+        Err(p) => p,
+    }
+}
+
+fn replace(files: &mut [BundleFile], path: &str, bytes: Vec<u8>) {
+    let f = files
+        .iter_mut()
+        .find(|(p, _)| p == path)
+        .expect("file in example");
+    f.1 = bytes;
+}
+
+#[test]
+fn round_trip_write_read_equal() {
+    let (m, files) = example::tiny();
+    let b = open(&m, &files).expect("example bundle is valid");
+    assert_eq!(b.manifest, m);
+    for (path, bytes) in &files {
+        assert_eq!(&b.read(path).expect("file readable"), bytes, "{path}");
+    }
+    let s = b.summary();
+    assert_eq!(s.frames, example::FRAMES);
+    assert_eq!(
+        s.lidar_points,
+        (example::FRAMES * example::LIDAR_POINTS) as u64
+    );
+    assert!((s.trajectory_length_m - 2.0).abs() < 1e-9);
+    assert!(s.ground_truth.is_some());
+    let pts = b
+        .read_lidar(&m.frames[0].lidar.clone().expect("lidar"))
+        .expect("lidar");
+    assert_eq!(pts.len(), example::LIDAR_POINTS);
+    assert_eq!(pts[11], [3.0, -1.6, 0.0]);
+}
+
+#[test]
+fn folder_bundle_reads_like_zip() {
+    let (m, files) = example::tiny();
+    let dir = std::env::temp_dir().join(format!("rogs-bundle-dir-{}", std::process::id()));
+    rogs::bundle::write_dir(&dir, &m, &files).expect("write dir");
+    let b = Bundle::open(&dir, Limits::default(), &mut |_, _| {}).expect("valid folder bundle");
+    assert_eq!(b.manifest, m);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn wrong_format_and_version() {
+    let (mut m, files) = example::tiny();
+    m.format = "something-else".into();
+    m.version = 7;
+    let p = problems(&m, &files);
+    assert!(p
+        .iter()
+        .any(|p| matches!(p, Problem::Format { .. }) && p.location() == "format"));
+    assert!(p
+        .iter()
+        .any(|p| matches!(p, Problem::Version { found: 7, .. })));
+}
+
+#[test]
+fn manifest_syntax_error_is_named() {
+    let (_, files) = example::tiny();
+    let mut z = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    z.start_file("manifest.json", zip::write::SimpleFileOptions::default())
+        .unwrap();
+    std::io::Write::write_all(&mut z, b"{\"format\": \"rogs-bundle\", ").unwrap();
+    for (p, b) in &files {
+        z.start_file(p.as_str(), zip::write::SimpleFileOptions::default())
+            .unwrap();
+        std::io::Write::write_all(&mut z, b).unwrap();
+    }
+    let bytes = z.finish().unwrap().into_inner();
+    let e = Bundle::from_zip_bytes(bytes, Limits::default())
+        .err()
+        .expect("invalid")
+        .0;
+    assert!(matches!(&e[0], Problem::ManifestSyntax(_)));
+    assert_eq!(e[0].location(), "manifest.json");
+}
+
+#[test]
+fn manifest_type_error_names_the_field() {
+    let (m, files) = example::tiny();
+    let mut v = serde_json::to_value(&m).unwrap();
+    v["cameras"][0]["fx"] = serde_json::json!("fifty");
+    let mut z = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    z.start_file("manifest.json", zip::write::SimpleFileOptions::default())
+        .unwrap();
+    std::io::Write::write_all(&mut z, v.to_string().as_bytes()).unwrap();
+    for (p, b) in &files {
+        z.start_file(p.as_str(), zip::write::SimpleFileOptions::default())
+            .unwrap();
+        std::io::Write::write_all(&mut z, b).unwrap();
+    }
+    let e = Bundle::from_zip_bytes(z.finish().unwrap().into_inner(), Limits::default())
+        .err()
+        .expect("invalid")
+        .0;
+    assert_eq!(e[0].location(), "cameras[0].fx", "{e:?}");
+    assert!(e[0].to_string().contains("expected f64"), "{e:?}");
+}
+
+#[test]
+fn missing_manifest_and_not_a_zip() {
+    let e = Bundle::from_zip_bytes(b"hello".to_vec(), Limits::default())
+        .err()
+        .expect("invalid")
+        .0;
+    assert!(matches!(e[0], Problem::NotZip(_)));
+    let mut z = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    z.start_file(
+        "scene/manifest.json",
+        zip::write::SimpleFileOptions::default(),
+    )
+    .unwrap();
+    let bytes = z.finish().unwrap().into_inner();
+    let e = Bundle::from_zip_bytes(bytes, Limits::default())
+        .err()
+        .expect("invalid")
+        .0;
+    assert_eq!(e, vec![Problem::MissingManifest]);
+}
+
+#[test]
+fn missing_file_names_field_and_path() {
+    let (m, mut files) = example::tiny();
+    files.retain(|(p, _)| p != "labels/front/000001.png");
+    let p = problems(&m, &files);
+    assert_eq!(p.len(), 1, "{p:?}");
+    assert_eq!(p[0].location(), "frames[1].views[0].label");
+    assert!(p[0].to_string().contains("labels/front/000001.png"));
+}
+
+#[test]
+fn image_size_must_match_camera() {
+    let (m, mut files) = example::tiny();
+    replace(
+        &mut files,
+        "images/front/000002.png",
+        png_rgb(&image::RgbImage::new(32, 48)),
+    );
+    let p = problems(&m, &files);
+    assert!(
+        matches!(
+            &p[..],
+            [Problem::ImageSize {
+                found_w: 32,
+                expected_w: 64,
+                ..
+            }]
+        ),
+        "{p:?}"
+    );
+    assert_eq!(p[0].location(), "images/front/000002.png");
+}
+
+#[test]
+fn label_values_within_class_table() {
+    let (m, mut files) = example::tiny();
+    let mut lab = image::GrayImage::new(64, 48);
+    lab.put_pixel(5, 7, image::Luma([42]));
+    replace(&mut files, "labels/front/000000.png", png_gray(&lab));
+    let p = problems(&m, &files);
+    assert!(
+        matches!(
+            &p[..],
+            [Problem::LabelOutOfRange {
+                value: 42,
+                x: 5,
+                y: 7,
+                pixels: 1,
+                ..
+            }]
+        ),
+        "{p:?}"
+    );
+    assert_eq!(p[0].location(), "labels/front/000000.png");
+}
+
+#[test]
+fn label_must_be_single_channel() {
+    let (m, mut files) = example::tiny();
+    replace(
+        &mut files,
+        "labels/front/000000.png",
+        png_rgb(&image::RgbImage::new(64, 48)),
+    );
+    let p = problems(&m, &files);
+    assert!(matches!(&p[..], [Problem::LabelFormat { .. }]), "{p:?}");
+}
+
+#[test]
+fn undecodable_image_is_named() {
+    let (m, mut files) = example::tiny();
+    replace(
+        &mut files,
+        "images/front/000001.png",
+        b"not an image".to_vec(),
+    );
+    let p = problems(&m, &files);
+    assert!(matches!(&p[..], [Problem::ImageDecode { .. }]), "{p:?}");
+    assert_eq!(p[0].location(), "images/front/000001.png");
+}
+
+#[test]
+fn poses_finite_and_orthonormal() {
+    // JSON has no NaN: serde writes null, which the parser names by field.
+    let (mut m, files) = example::tiny();
+    m.frames[0].vehicle_to_world[0][3] = f64::NAN;
+    let p = problems(&m, &files);
+    assert!(
+        matches!(&p[..], [Problem::ManifestField { field, .. }] if field == "frames[0].vehicle_to_world[0][3]"),
+        "{p:?}"
+    );
+    assert!(matches!(
+        rogs::bundle::check_rigid("f", &[[f64::NAN; 4]; 4]),
+        Some(Problem::NonFinite { .. })
+    ));
+    let (mut m, files) = example::tiny();
+    m.frames[1].vehicle_to_world[0][0] = 1.1;
+    m.frames[2].vehicle_to_world[3] = [0.0, 0.0, 1.0, 1.0];
+    m.cameras[0].camera_to_vehicle[0][0] = -1.0; // breaks orthogonality of the columns
+    let p = problems(&m, &files);
+    let loc: Vec<_> = p.iter().map(|p| p.location()).collect();
+    assert!(p.iter().any(
+        |p| matches!(p, Problem::NotRotation { field, .. } if field == "frames[1].vehicle_to_world")
+    ));
+    assert!(p.iter().any(
+        |p| matches!(p, Problem::NotRigid { field } if field == "frames[2].vehicle_to_world")
+    ));
+    assert!(loc.contains(&"cameras[0].camera_to_vehicle"), "{loc:?}");
+    // A reflection (det = -1) is orthonormal but not a rotation.
+    let (mut m, files) = example::tiny();
+    m.frames[1].vehicle_to_world[2][2] = -1.0;
+    let p = problems(&m, &files);
+    assert!(matches!(&p[..], [Problem::NotRotation { .. }]), "{p:?}");
+    // A slightly noisy rotation within tolerance is fine.
+    let (mut m, files) = example::tiny();
+    m.frames[1].vehicle_to_world[0][1] = 1e-5;
+    assert!(open(&m, &files).is_ok());
+}
+
+#[test]
+fn at_least_two_frames() {
+    let (mut m, files) = example::tiny();
+    m.frames.truncate(1);
+    let p = problems(&m, &files);
+    assert!(p
+        .iter()
+        .any(|p| matches!(p, Problem::TooFewFrames { found: 1 }) && p.location() == "frames"));
+}
+
+#[test]
+fn lidar_length_multiple_of_stride() {
+    let (m, mut files) = example::tiny();
+    replace(&mut files, "lidar/000001.bin", vec![0u8; 16 * 10 + 12]);
+    let p = problems(&m, &files);
+    assert!(
+        matches!(
+            &p[..],
+            [Problem::LidarStride {
+                len: 172,
+                stride: 16,
+                ..
+            }]
+        ),
+        "{p:?}"
+    );
+    assert_eq!(p[0].location(), "lidar/000001.bin");
+}
+
+#[test]
+fn unknown_camera_and_duplicate_class() {
+    let (mut m, files) = example::tiny();
+    m.frames[1].views[0].camera = "rear".into();
+    m.semantic_classes[1].id = 0;
+    let p = problems(&m, &files);
+    let loc: Vec<_> = p.iter().map(|p| p.location()).collect();
+    assert!(loc.contains(&"frames[1].views[0].camera"), "{loc:?}");
+    assert!(loc.contains(&"semantic_classes[1].id"), "{loc:?}");
+}
+
+#[test]
+fn ground_truth_elevation_size() {
+    let (m, mut files) = example::tiny();
+    replace(&mut files, "truth/elevation.f32", vec![0u8; 100]);
+    let p = problems(&m, &files);
+    assert!(
+        matches!(
+            &p[..],
+            [Problem::ElevationSize {
+                len: 100,
+                expected: 512,
+                ..
+            }]
+        ),
+        "{p:?}"
+    );
+}
+
+#[test]
+fn reports_all_problems_not_only_the_first() {
+    let (mut m, mut files) = example::tiny();
+    m.version = 2;
+    files.retain(|(p, _)| p != "images/front/000000.png");
+    replace(&mut files, "lidar/000002.bin", vec![0u8; 3]);
+    m.frames[2].vehicle_to_world[1][1] = 3.0;
+    let p = problems(&m, &files);
+    assert_eq!(p.len(), 4, "{p:?}");
+}
+
+#[test]
+fn path_traversal_is_refused() {
+    // In the manifest …
+    let (mut m, files) = example::tiny();
+    m.frames[0].views[0].image = "../../etc/passwd".into();
+    m.frames[1].views[0].label = "/abs/label.png".into();
+    let p = problems(&m, &files);
+    assert!(
+        matches!(&p[0], Problem::UnsafePath { field, .. } if field == "frames[0].views[0].image"),
+        "{p:?}"
+    );
+    assert!(
+        matches!(&p[1], Problem::UnsafePath { field, .. } if field == "frames[1].views[0].label"),
+        "{p:?}"
+    );
+    // … and as a zip entry name.
+    let (m, mut files) = example::tiny();
+    files.push(("../evil.sh".into(), b"rm -rf /".to_vec()));
+    let p = problems(&m, &files);
+    assert!(
+        matches!(&p[..], [Problem::UnsafeEntry { path }] if path == "../evil.sh"),
+        "{p:?}"
+    );
+}
+
+#[test]
+fn zip_bomb_is_refused() {
+    let (m, mut files) = example::tiny();
+    // 64 MiB of zeros deflates to ~64 KiB: past a 16 MiB limit it must not be inflated.
+    files.push(("padding.bin".into(), vec![0u8; 64 << 20]));
+    let bytes = zip(&m, &files);
+    assert!(bytes.len() < 1 << 20, "the bomb should be small on disk");
+    let limits = Limits {
+        max_file_bytes: 16 << 20,
+        ..Limits::default()
+    };
+    let p = Bundle::from_zip_bytes(bytes, limits)
+        .err()
+        .expect("refused")
+        .0;
+    assert!(
+        matches!(&p[..], [Problem::FileTooLarge { path, .. }] if path == "padding.bin"),
+        "{p:?}"
+    );
+}
+
+#[test]
+fn oversized_image_dimensions_are_refused() {
+    let (m, files) = example::tiny();
+    let limits = Limits {
+        max_image_side: 32,
+        ..Limits::default()
+    };
+    let p = Bundle::from_zip_bytes(zip(&m, &files), limits)
+        .err()
+        .expect("refused")
+        .0;
+    assert!(
+        p.iter()
+            .any(|p| matches!(p, Problem::ImageTooLarge { width: 64, .. })),
+        "{p:?}"
+    );
+}

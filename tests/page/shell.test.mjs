@@ -1,0 +1,118 @@
+// Page tests in headless Chromium (WebGPU on SwiftShader): the shell loads, WebGPU is
+// found, dropped / picked / ?url= bundles show their summary or their named problems,
+// and the page keeps working after an error. Screenshots go to target/screenshots/.
+import { test, before, after } from 'node:test';
+import assert from 'node:assert/strict';
+import fs from 'node:fs';
+import path from 'node:path';
+import { chromium } from 'playwright-core';
+import { createServer } from '../../scripts/serve.mjs';
+
+const root = path.resolve(import.meta.dirname, '../..');
+const fixtures = path.join(root, 'target/page-fixtures');
+const shots = path.join(root, 'target/screenshots');
+const FLAGS = [
+  '--no-sandbox', '--enable-unsafe-webgpu', '--enable-features=Vulkan', '--use-vulkan=swiftshader',
+  '--use-angle=swiftshader', '--no-first-run', '--disable-background-networking',
+  '--disable-component-update', '--disable-sync', '--disable-quic',
+];
+
+let server, browser, base;
+
+before(async () => {
+  fs.mkdirSync(shots, { recursive: true });
+  server = createServer([['/fixtures/', fixtures], ['/', path.join(root, 'www')]]);
+  await new Promise((r) => server.listen(0, '127.0.0.1', r));
+  base = `http://127.0.0.1:${server.address().port}`;
+  browser = await chromium.launch({ executablePath: '/usr/bin/chromium', args: FLAGS });
+});
+
+after(async () => {
+  await browser?.close();
+  server?.close();
+});
+
+async function openPage(query = '') {
+  const page = await browser.newPage({ viewport: { width: 1100, height: 800 } });
+  const errors = [];
+  page.on('pageerror', (e) => errors.push(String(e)));
+  const requests = [];
+  page.on('request', (r) => requests.push(r.url()));
+  await page.goto(`${base}/${query}`);
+  await page.waitForSelector('body[data-gpu-checked="true"]', { timeout: 60_000 });
+  return { page, errors, requests };
+}
+
+async function drop(page, file) {
+  const b64 = fs.readFileSync(path.join(fixtures, file)).toString('base64');
+  const dt = await page.evaluateHandle(({ b64, name }) => {
+    const bytes = Uint8Array.from(atob(b64), (c) => c.charCodeAt(0));
+    const t = new DataTransfer();
+    t.items.add(new File([bytes], name, { type: 'application/zip' }));
+    return t;
+  }, { b64, name: file });
+  await page.dispatchEvent('body', 'drop', { dataTransfer: dt });
+}
+
+test('WebGPU is found and the GPU self-test passes', async () => {
+  const { page, errors } = await openPage();
+  assert.match(await page.textContent('#gpu'), /self-test passed/);
+  assert.equal(await page.isHidden('#webgpu'), true);
+  assert.deepEqual(errors, []);
+  await page.close();
+});
+
+test('a dropped valid bundle shows its summary; an invalid one its named problems; the page survives', async () => {
+  const { page, errors, requests } = await openPage();
+  await drop(page, 'valid.zip');
+  await page.waitForSelector('#summary:not([hidden])');
+  assert.match(await page.textContent('#status'), /valid\.zip is a valid bundle/);
+  assert.equal(await page.textContent('dd[data-fact="trajectory"]'), '2.0 m');
+  assert.match(await page.textContent('dd[data-fact="LiDAR"]'), /300 points in 3 sweeps/);
+  assert.match(await page.textContent('#classes'), /lane_marking/);
+  await page.screenshot({ path: path.join(shots, 'shell-summary.png'), fullPage: true });
+
+  await drop(page, 'invalid.zip');
+  await page.waitForSelector('#problems:not([hidden])');
+  const problems = await page.textContent('#problem-list');
+  assert.match(problems, /frames\[1\]\.views\[0\]\.image/);
+  assert.match(problems, /images\/front\/000001\.png/);
+  assert.match(problems, /frames\[2\]\.vehicle_to_world/);
+  assert.match(problems, /label value 99/);
+  assert.match(await page.textContent('#status'), /3 problem\(s\)/);
+  assert.equal(await page.isHidden('#summary'), true);
+  await page.screenshot({ path: path.join(shots, 'shell-problems.png'), fullPage: true });
+
+  // Still alive: a file that is not a zip, then the valid bundle again through the picker.
+  await page.evaluate(() => {
+    const t = new DataTransfer();
+    t.items.add(new File([new TextEncoder().encode('hello')], 'notes.txt'));
+    window.dispatchEvent(new DragEvent('drop', { dataTransfer: t, cancelable: true }));
+  });
+  await page.waitForFunction(() => /not a readable zip/.test(document.getElementById('problem-list').textContent));
+  await page.setInputFiles('#picker', path.join(fixtures, 'valid.zip'));
+  await page.waitForSelector('#summary:not([hidden])');
+  assert.deepEqual(errors, []);
+  // No request leaves the page's own origin.
+  assert.ok(requests.every((u) => u.startsWith(base)), requests.join('\n'));
+  await page.close();
+});
+
+test('?url= loads a bundle from the server; a bad address is explained', async () => {
+  const { page } = await openPage('?url=fixtures/valid.zip');
+  await page.waitForSelector('#summary:not([hidden])');
+  assert.equal(await page.textContent('dd[data-fact="frames"]'), '3 (3 views, 0.2 s)');
+  await page.close();
+  const bad = await openPage('?url=fixtures/missing.zip');
+  await bad.page.waitForFunction(() => /Could not download/.test(document.getElementById('status').textContent));
+  assert.match(await bad.page.textContent('#status'), /404/);
+  await bad.page.close();
+});
+
+test('the example button opens the built-in example', async () => {
+  const { page } = await openPage();
+  await page.click('#example');
+  await page.waitForSelector('#summary:not([hidden])');
+  assert.equal(await page.textContent('#summary-title'), 'tiny example');
+  await page.close();
+});

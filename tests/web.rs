@@ -1,0 +1,54 @@
+//! The same GPU and bundle checks in a browser (headless Chromium, WebGPU on
+//! SwiftShader), run with `wasm-pack test --headless --chrome`.
+#![cfg(target_arch = "wasm32")]
+
+use rogs::bundle::{example, write_zip, Bundle, Limits, Problem};
+use rogs::gpu::scatter_add::{scatter_add_cpu, scatter_add_gpu};
+use rogs::gpu::{AccumStrategy, GpuContext};
+use wasm_bindgen_test::*;
+
+wasm_bindgen_test_configure!(run_in_browser);
+
+#[wasm_bindgen_test]
+async fn webgpu_adapter_found_and_scatter_add_matches_cpu() {
+    let ctx = match GpuContext::new().await {
+        Ok(c) => c,
+        Err(e) => panic!("WebGPU adapter required: {e}"),
+    };
+    // Browsers have no float atomics: the CAS path must have been chosen.
+    assert_eq!(ctx.report.accumulation, AccumStrategy::CasU32);
+    let n = 200_000;
+    let index: Vec<u32> = (0..n as u32)
+        .map(|i| i.wrapping_mul(2654435761) % 331)
+        .collect();
+    let values: Vec<f32> = (0..n)
+        .map(|i| ((i * 37 % 101) as f32 - 50.0) / 64.0)
+        .collect();
+    let gpu = scatter_add_gpu(&ctx, AccumStrategy::CasU32, 331, &index, &values)
+        .await
+        .expect("gpu");
+    let cpu = scatter_add_cpu(331, &index, &values);
+    let max_mag = cpu.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+    for (b, (g, c)) in gpu.iter().zip(&cpu).enumerate() {
+        assert!(
+            (g - c).abs() <= 1e-3 * max_mag.max(1.0),
+            "bin {b}: gpu {g} cpu {c}"
+        );
+    }
+}
+
+#[wasm_bindgen_test]
+fn bundle_round_trip_and_named_error_in_wasm() {
+    let (m, files) = example::tiny();
+    let b = Bundle::from_zip_bytes(write_zip(&m, &files).expect("zip"), Limits::default())
+        .expect("valid");
+    assert_eq!(b.manifest, m);
+    let mut files = files;
+    files.retain(|(p, _)| p != "images/front/000001.png");
+    let e = Bundle::from_zip_bytes(write_zip(&m, &files).expect("zip"), Limits::default())
+        .err()
+        .expect("invalid");
+    assert!(
+        matches!(&e.0[..], [Problem::MissingFile { field, .. }] if field == "frames[1].views[0].image")
+    );
+}

@@ -1,0 +1,188 @@
+// The page shell: loads the engine, checks WebGPU, takes a bundle (drop, picker,
+// ?url=, example) and shows its summary or its problems in words. Nothing here
+// sends user data anywhere: bundles are read in memory by the wasm engine.
+import init, { inspect_bundle, example_bundle, gpu_info } from './pkg/rogs.js';
+
+const $ = (id) => document.getElementById(id);
+let engineReady = null;
+
+function setStatus(text, kind = 'info') {
+  const s = $('status');
+  s.textContent = text;
+  s.dataset.kind = kind;
+}
+
+function explainNoWebGPU(reason) {
+  const box = $('webgpu');
+  box.hidden = false;
+  box.innerHTML = '';
+  const h = document.createElement('h2');
+  h.textContent = 'WebGPU is not available in this browser';
+  const p = document.createElement('p');
+  p.textContent = reason + ' Bundles can still be checked here, but optimising a map needs WebGPU: '
+    + 'use a current Chrome or Edge (113 or newer) with hardware acceleration on. On Linux, start Chromium with '
+    + '--enable-unsafe-webgpu --enable-features=Vulkan. Safari 26 and Firefox 141 or newer on Windows also work; '
+    + 'in older Firefox set dom.webgpu.enabled in about:config.';
+  box.append(h, p);
+}
+
+async function checkGpu() {
+  if (!('gpu' in navigator)) {
+    explainNoWebGPU('This browser has no navigator.gpu.');
+    $('gpu').textContent = 'GPU: none';
+    return;
+  }
+  try {
+    const r = await gpu_info();
+    $('gpu').textContent = `GPU: ${r.name} (${r.backend}), ${Math.round(r.max_storage_buffer_binding_size / 1048576)} MiB per storage binding, accumulation ${r.accumulation}; self-test passed.`;
+  } catch (e) {
+    explainNoWebGPU(String(e));
+    $('gpu').textContent = 'GPU: unavailable';
+  }
+}
+
+function showProblems(problems) {
+  $('summary').hidden = true;
+  const list = $('problem-list');
+  list.innerHTML = '';
+  for (const p of problems) {
+    const li = document.createElement('li');
+    if (p.location) {
+      const c = document.createElement('code');
+      c.textContent = p.location;
+      li.append(c, ' ');
+    }
+    li.append(p.message);
+    list.append(li);
+  }
+  $('problems').hidden = false;
+}
+
+function showSummary(s, source) {
+  $('problems').hidden = true;
+  $('summary-title').textContent = s.name || source;
+  const facts = [
+    ['source', source],
+    ['frames', `${s.frames} (${s.views} views, ${s.duration_s.toFixed(1)} s)`],
+    ['trajectory', `${s.trajectory_length_m.toFixed(1)} m`],
+    ['cameras', String(s.cameras.length)],
+    ['LiDAR', s.lidar_points ? `${s.lidar_points.toLocaleString('en')} points in ${s.lidar_sweeps} sweeps` : 'none'],
+    ['ground truth', s.ground_truth ? `BEV ${s.ground_truth.width}×${s.ground_truth.height} at ${s.ground_truth.resolution_m} m` : 'none'],
+  ];
+  const dl = $('summary-facts');
+  dl.innerHTML = '';
+  for (const [k, v] of facts) {
+    const dt = document.createElement('dt');
+    dt.textContent = k;
+    const dd = document.createElement('dd');
+    dd.textContent = v;
+    dd.dataset.fact = k;
+    dl.append(dt, dd);
+  }
+  const tbody = $('cameras').querySelector('tbody');
+  tbody.innerHTML = '';
+  for (const c of s.cameras) {
+    const tr = document.createElement('tr');
+    for (const v of [c.name, `${c.width}×${c.height}`, c.fx.toFixed(1), c.fy.toFixed(1)]) {
+      const td = document.createElement('td');
+      td.textContent = v;
+      tr.append(td);
+    }
+    tbody.append(tr);
+  }
+  const ul = $('classes');
+  ul.innerHTML = '';
+  for (const c of s.classes) {
+    const li = document.createElement('li');
+    const sw = document.createElement('span');
+    sw.className = 'swatch';
+    sw.style.background = `rgb(${c.color.join(',')})`;
+    li.append(sw, `${c.id} ${c.name} (${c.role})`);
+    ul.append(li);
+  }
+  $('summary').hidden = false;
+}
+
+async function openBytes(bytes, source) {
+  await engineReady;
+  setStatus(`Checking ${source}…`);
+  // Let the status paint before the (synchronous) validation runs.
+  await new Promise((r) => setTimeout(r, 0));
+  try {
+    const r = inspect_bundle(bytes);
+    if (r.status === 'valid') {
+      showSummary(r.summary, source);
+      setStatus(`${source} is a valid bundle.`, 'ok');
+    } else {
+      showProblems(r.problems);
+      setStatus(`${source} is not a valid bundle: ${r.problems.length} problem(s).`, 'error');
+    }
+  } catch (e) {
+    setStatus(`Could not read ${source}: ${e}`, 'error');
+  }
+}
+
+async function openFile(file) {
+  if (!file) return;
+  try {
+    const bytes = new Uint8Array(await file.arrayBuffer());
+    await openBytes(bytes, file.name);
+  } catch (e) {
+    setStatus(`Could not read ${file.name}: ${e}`, 'error');
+  }
+}
+
+async function openUrl(url) {
+  setStatus(`Downloading ${url}…`);
+  try {
+    const res = await fetch(url);
+    if (!res.ok) throw new Error(`the server answered ${res.status} ${res.statusText}`);
+    await openBytes(new Uint8Array(await res.arrayBuffer()), url);
+  } catch (e) {
+    setStatus(`Could not download ${url}: ${e.message || e}. Check the address, or drop the file instead.`, 'error');
+  }
+}
+
+function wireInputs() {
+  $('picker').addEventListener('change', (e) => openFile(e.target.files[0]));
+  $('example').addEventListener('click', async () => {
+    await engineReady;
+    try {
+      await openBytes(example_bundle(), 'tiny example');
+    } catch (e) {
+      setStatus(`Could not build the example: ${e}`, 'error');
+    }
+  });
+  let depth = 0;
+  const overlay = $('drop-overlay');
+  window.addEventListener('dragenter', (e) => { e.preventDefault(); depth++; overlay.hidden = false; });
+  window.addEventListener('dragleave', () => { depth = Math.max(0, depth - 1); if (!depth) overlay.hidden = true; });
+  window.addEventListener('dragover', (e) => e.preventDefault());
+  window.addEventListener('drop', (e) => {
+    e.preventDefault();
+    depth = 0;
+    overlay.hidden = true;
+    const file = e.dataTransfer && e.dataTransfer.files[0];
+    if (file) openFile(file);
+    else setStatus('Nothing to open: drop a .zip file.', 'error');
+  });
+}
+
+async function main() {
+  wireInputs();
+  engineReady = init();
+  try {
+    await engineReady;
+  } catch (e) {
+    setStatus(`The engine failed to load: ${e}. Reload the page; if it persists, this browser may lack WebAssembly.`, 'error');
+    return;
+  }
+  setStatus('Ready: drop a bundle.');
+  document.body.dataset.ready = 'true';
+  await checkGpu();
+  document.body.dataset.gpuChecked = 'true';
+  const url = new URLSearchParams(location.search).get('url');
+  if (url) await openUrl(url);
+}
+
+main();

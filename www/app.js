@@ -34,7 +34,7 @@ async function checkGpu() {
   }
   try {
     const r = await gpu_info();
-    $('gpu').textContent = `GPU: ${r.name} (${r.backend}), ${Math.round(r.max_storage_buffer_binding_size / 1048576)} MiB per storage binding, accumulation ${r.accumulation}; self-test passed.`;
+    $('gpu').textContent = `GPU: ${r.name || 'unnamed adapter'} (${r.backend}), ${Math.round(r.max_storage_buffer_binding_size / 1048576)} MiB per storage binding, accumulation ${r.accumulation}; self-test passed.`;
   } catch (e) {
     explainNoWebGPU(String(e));
     $('gpu').textContent = 'GPU: unavailable';
@@ -52,7 +52,9 @@ function showProblems(problems) {
       c.textContent = p.location;
       li.append(c, ' ');
     }
-    li.append(p.message);
+    // Messages start with their location; the code tag already shows it.
+    const prefix = `${p.location}: `;
+    li.append(p.location && p.message.startsWith(prefix) ? p.message.slice(prefix.length) : p.message);
     list.append(li);
   }
   $('problems').hidden = false;

@@ -152,7 +152,7 @@ impl Source for DirSource {
             return None;
         }
         let m = std::fs::metadata(self.root.join(path)).ok()?;
-        m.is_file().then(|| m.len())
+        m.is_file().then_some(m.len())
     }
 
     fn read(&self, path: &str, limits: &Limits) -> Result<Vec<u8>, Problem> {

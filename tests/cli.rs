@@ -1,0 +1,53 @@
+//! The `rogs` binary: inspect prints a summary, or every problem with exit code 2.
+#![cfg(not(target_arch = "wasm32"))]
+
+use std::process::Command;
+
+fn rogs(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_rogs")).args(args).output().expect("run rogs")
+}
+
+fn temp(name: &str) -> std::path::PathBuf {
+    std::env::temp_dir().join(format!("rogs-cli-{}-{name}", std::process::id()))
+}
+
+#[test]
+fn inspect_valid_bundle_prints_summary() {
+    let out = temp("valid.zip");
+    assert!(rogs(&["example", "--out", out.to_str().unwrap()]).status.success());
+    let o = rogs(&["inspect", out.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(0));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("trajectory  2.0 m"), "{text}");
+    assert!(text.contains("300 points in 3 sweeps"), "{text}");
+    let o = rogs(&["inspect", "--json", out.to_str().unwrap()]);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    assert_eq!(v["frames"], 3);
+    std::fs::remove_file(out).ok();
+}
+
+#[test]
+fn inspect_broken_bundle_lists_problems_with_exit_code_2() {
+    let dir = temp("broken");
+    assert!(rogs(&["example", "--out", dir.to_str().unwrap()]).status.success());
+    std::fs::remove_file(dir.join("images/front/000002.png")).unwrap();
+    std::fs::write(dir.join("lidar/000000.bin"), [0u8; 5]).unwrap();
+    let o = rogs(&["inspect", dir.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("frames[2].views[0].image"), "{err}");
+    assert!(err.contains("lidar/000000.bin: 5 bytes"), "{err}");
+    let o = rogs(&["inspect", "--json", dir.to_str().unwrap()]);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    assert_eq!(v["problems"].as_array().map(|a| a.len()), Some(2));
+    std::fs::remove_dir_all(dir).ok();
+}
+
+#[test]
+fn help_explains_each_command() {
+    let o = rogs(&["--help"]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    for cmd in ["inspect", "gpu", "example"] {
+        assert!(text.contains(cmd), "{text}");
+    }
+}

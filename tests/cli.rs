@@ -4,7 +4,10 @@
 use std::process::Command;
 
 fn rogs(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_rogs")).args(args).output().expect("run rogs")
+    Command::new(env!("CARGO_BIN_EXE_rogs"))
+        .args(args)
+        .output()
+        .expect("run rogs")
 }
 
 fn temp(name: &str) -> std::path::PathBuf {
@@ -14,7 +17,9 @@ fn temp(name: &str) -> std::path::PathBuf {
 #[test]
 fn inspect_valid_bundle_prints_summary() {
     let out = temp("valid.zip");
-    assert!(rogs(&["example", "--out", out.to_str().unwrap()]).status.success());
+    assert!(rogs(&["example", "--out", out.to_str().unwrap()])
+        .status
+        .success());
     let o = rogs(&["inspect", out.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(0));
     let text = String::from_utf8_lossy(&o.stdout);
@@ -29,7 +34,9 @@ fn inspect_valid_bundle_prints_summary() {
 #[test]
 fn inspect_broken_bundle_lists_problems_with_exit_code_2() {
     let dir = temp("broken");
-    assert!(rogs(&["example", "--out", dir.to_str().unwrap()]).status.success());
+    assert!(rogs(&["example", "--out", dir.to_str().unwrap()])
+        .status
+        .success());
     std::fs::remove_file(dir.join("images/front/000002.png")).unwrap();
     std::fs::write(dir.join("lidar/000000.bin"), [0u8; 5]).unwrap();
     let o = rogs(&["inspect", dir.to_str().unwrap()]);

@@ -5,7 +5,9 @@
 //! optim → bev → export (see docs/ARCHITECTURE.md for what exists today).
 
 pub mod bundle;
+pub mod eval;
 pub mod gpu;
+pub mod synth;
 
 #[cfg(not(target_arch = "wasm32"))]
 pub mod cli;

@@ -1,9 +1,11 @@
 //! The native command line: `rogs <command>`. Each command lives in its own file.
 
+mod eval;
 mod example;
 mod gpu;
 mod inspect;
 pub mod progress;
+mod synth;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -46,6 +48,20 @@ enum Command {
     /// The example has every optional part (LiDAR, ground truth) with tiny images; it
     /// shows the format, it is not a road scene.
     Example(example::Args),
+    /// Generate a synthetic road scene bundle with exact ground truth.
+    ///
+    /// A procedural road (lanes, dashed and solid markings, crosswalk, stop line,
+    /// curbs with a height step, sidewalks, slope and cross-fall, a speed table,
+    /// cracks and patches, a manhole, parked cars) is rendered by an independent CPU
+    /// ray caster from the true poses; the bundle gets the poses with the requested
+    /// noise, and BEV truth rasters (RGB, classes, elevation, validity).
+    Synth(synth::Args),
+    /// Score a predicted BEV map: PSNR, mIoU, elevation RMSE / MAE / 95th percentile.
+    ///
+    /// The reference is the bundle's BEV truth, or the LiDAR pseudo-ground-truth when
+    /// it has none (elevation then against the nearest LiDAR point within 0.1 m in
+    /// xy). Prints {"metrics": {...}} as JSON.
+    Eval(eval::Args),
 }
 
 pub fn run() -> ExitCode {
@@ -54,6 +70,8 @@ pub fn run() -> ExitCode {
         Command::Inspect(a) => inspect::run(a),
         Command::Gpu(a) => gpu::run(a),
         Command::Example(a) => example::run(a),
+        Command::Synth(a) => synth::run(a),
+        Command::Eval(a) => eval::run(a),
     };
     match result {
         Ok(code) => code,

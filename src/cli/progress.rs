@@ -35,6 +35,10 @@ impl Progress {
         }
     }
 
+    pub fn set_message(&self, what: &str) {
+        self.bar.set_message(what.to_string());
+    }
+
     pub fn finish(self) {
         self.bar.finish_and_clear();
     }

@@ -1,0 +1,184 @@
+//! The evaluation metrics of the paper, with its quirks removed: PSNR averages over
+//! valid pixels only; mIoU counts only road classes present in truth or prediction;
+//! elevation errors are taken at surfel centres.
+
+use super::raster::BevRaster;
+use serde::Serialize;
+
+/// The report block shared by `rogs eval` and `rogs reconstruct`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Metrics {
+    pub psnr_db: Option<f64>,
+    pub miou: Option<f64>,
+    pub elevation_rmse_m: Option<f64>,
+    pub elevation_mae_m: Option<f64>,
+    pub elevation_p95_m: Option<f64>,
+}
+
+/// PSNR (dB, peak 1.0) of `pred` against `truth` over pixels valid in both. Both
+/// rasters may differ in geometry: each truth pixel looks up the prediction at its centre.
+pub fn psnr(pred: &BevRaster, truth: &BevRaster) -> Option<f64> {
+    let (mut se, mut n) = (0.0f64, 0u64);
+    for_valid_pairs(pred, truth, |p, t| {
+        let (a, b) = (
+            pred.rgb.get_pixel(p.0, p.1).0,
+            truth.rgb.get_pixel(t.0, t.1).0,
+        );
+        for k in 0..3 {
+            let d = (a[k] as f64 - b[k] as f64) / 255.0;
+            se += d * d;
+        }
+        n += 3;
+    });
+    (n > 0).then(|| {
+        let mse = se / n as f64;
+        if mse <= 0.0 {
+            f64::INFINITY
+        } else {
+            -10.0 * mse.log10()
+        }
+    })
+}
+
+/// Mean IoU over `road_classes` that occur in the truth or the prediction (valid pixels).
+pub fn miou(pred: &BevRaster, truth: &BevRaster, road_classes: &[u8]) -> Option<f64> {
+    let mut inter = [0u64; 256];
+    let mut union = [0u64; 256];
+    for_valid_pairs(pred, truth, |p, t| {
+        let (a, b) = (
+            pred.class_ids.get_pixel(p.0, p.1).0[0],
+            truth.class_ids.get_pixel(t.0, t.1).0[0],
+        );
+        if a == b {
+            inter[a as usize] += 1;
+            union[a as usize] += 1;
+        } else {
+            union[a as usize] += 1;
+            union[b as usize] += 1;
+        }
+    });
+    let ious: Vec<f64> = road_classes
+        .iter()
+        .filter(|&&c| union[c as usize] > 0)
+        .map(|&c| inter[c as usize] as f64 / union[c as usize] as f64)
+        .collect();
+    (!ious.is_empty()).then(|| ious.iter().sum::<f64>() / ious.len() as f64)
+}
+
+fn for_valid_pairs(pred: &BevRaster, truth: &BevRaster, mut f: impl FnMut((u32, u32), (u32, u32))) {
+    let same = pred.origin == truth.origin
+        && pred.resolution == truth.resolution
+        && pred.width == truth.width
+        && pred.height == truth.height;
+    for r in 0..truth.height {
+        for c in 0..truth.width {
+            if !truth.is_valid(c, r) {
+                continue;
+            }
+            let p = if same {
+                Some((c, r))
+            } else {
+                let (x, y) = truth.centre(c, r);
+                pred.pixel_of(x, y)
+            };
+            if let Some(p) = p.filter(|p| pred.is_valid(p.0, p.1)) {
+                f(p, (c, r));
+            }
+        }
+    }
+}
+
+/// Root-mean-square, mean absolute and 95th-percentile absolute error.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ErrorStats {
+    pub rmse: f64,
+    pub mae: f64,
+    pub p95: f64,
+    pub count: usize,
+}
+
+pub fn error_stats(errors: &mut [f64]) -> Option<ErrorStats> {
+    if errors.is_empty() {
+        return None;
+    }
+    let n = errors.len() as f64;
+    let rmse = (errors.iter().map(|e| e * e).sum::<f64>() / n).sqrt();
+    let mae = errors.iter().map(|e| e.abs()).sum::<f64>() / n;
+    for e in errors.iter_mut() {
+        *e = e.abs();
+    }
+    errors.sort_by(f64::total_cmp);
+    // Nearest-rank percentile.
+    let k = ((0.95 * n).ceil() as usize).clamp(1, errors.len()) - 1;
+    Some(ErrorStats {
+        rmse,
+        mae,
+        p95: errors[k],
+        count: errors.len(),
+    })
+}
+
+/// Elevation errors of `points` (surfel centres, world xyz) against the truth raster,
+/// for points over valid truth.
+pub fn elevation_vs_raster(points: &[[f64; 3]], truth: &BevRaster) -> Option<ErrorStats> {
+    let mut errors: Vec<f64> = points
+        .iter()
+        .filter_map(|p| truth.elevation_xy(p[0], p[1]).map(|z| p[2] - z))
+        .collect();
+    error_stats(&mut errors)
+}
+
+/// Elevation errors against reference points (accumulated LiDAR): for each point the
+/// nearest reference within `radius` in xy, as in the paper (0.1 m).
+pub fn elevation_vs_points(
+    points: &[[f64; 3]],
+    reference: &[[f64; 3]],
+    radius: f64,
+) -> Option<ErrorStats> {
+    let grid = PointGrid::new(reference, radius);
+    let mut errors: Vec<f64> = points
+        .iter()
+        .filter_map(|p| grid.nearest(p[0], p[1], radius).map(|q| p[2] - q[2]))
+        .collect();
+    error_stats(&mut errors)
+}
+
+/// Uniform-grid hash of points in xy, for radius queries.
+pub struct PointGrid<'a> {
+    cell: f64,
+    map: std::collections::HashMap<(i64, i64), Vec<usize>>,
+    pts: &'a [[f64; 3]],
+}
+
+impl<'a> PointGrid<'a> {
+    pub fn new(pts: &'a [[f64; 3]], cell: f64) -> Self {
+        let mut map: std::collections::HashMap<(i64, i64), Vec<usize>> = Default::default();
+        for (i, p) in pts.iter().enumerate() {
+            map.entry(((p[0] / cell).floor() as i64, (p[1] / cell).floor() as i64))
+                .or_default()
+                .push(i);
+        }
+        Self { cell, map, pts }
+    }
+
+    pub fn nearest(&self, x: f64, y: f64, radius: f64) -> Option<[f64; 3]> {
+        let (ci, cj) = (
+            (x / self.cell).floor() as i64,
+            (y / self.cell).floor() as i64,
+        );
+        let reach = (radius / self.cell).ceil() as i64;
+        let mut best: Option<(f64, usize)> = None;
+        for j in cj - reach..=cj + reach {
+            for i in ci - reach..=ci + reach {
+                for &k in self.map.get(&(i, j)).into_iter().flatten() {
+                    let p = self.pts[k];
+                    let d = (p[0] - x).hypot(p[1] - y);
+                    if d <= radius && best.is_none_or(|b| d < b.0) {
+                        best = Some((d, k));
+                    }
+                }
+            }
+        }
+        best.map(|b| self.pts[b.1])
+    }
+}

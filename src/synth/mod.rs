@@ -1,0 +1,382 @@
+//! `rogs synth`: synthetic road scenes with exact truth.
+//!
+//! A procedural road (`road.rs`) is sampled into a true heightfield (`field.rs`);
+//! parked cars and the sky complete the world (`world.rs`); an independent CPU ray
+//! caster (`raycast.rs`) renders each camera of a rig (`rig.rs`) from the *true*
+//! poses, while the bundle receives the poses with the configured noise. The bundle
+//! carries BEV truth rasters (`truth.rs`) so that reconstructions can be scored.
+
+pub mod classes;
+pub mod field;
+mod par;
+pub mod raycast;
+pub mod rig;
+pub mod rng;
+pub mod road;
+pub mod truth;
+pub mod world;
+
+use crate::bundle::example::{png_gray, png_rgb};
+use crate::bundle::{
+    BundleFile, Camera, Frame, GroundTruth, LidarSensor, Manifest, Mat4Rows, View, FORMAT, VERSION,
+};
+use raycast::{render, Exposure};
+use rig::{camera_to_vehicle, lidar_sweep, mul, noisy_poses, vehicle_pose, PoseNoise};
+use rng::Rng;
+use road::RoadSpec;
+use world::World;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Preset {
+    /// Unit tests: one 64×48 camera, 8 frames; generates in well under a second.
+    Tiny,
+    /// The page's embedded demo: 3 cameras, ~25 m of road (~300 m² of corridor).
+    Demo,
+    /// The performance reference: 6 cameras at 800×225, 240 frames, ~200 m of road.
+    NuscenesLike,
+}
+
+impl std::str::FromStr for Preset {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "tiny" => Ok(Preset::Tiny),
+            "demo" => Ok(Preset::Demo),
+            "nuscenes-like" => Ok(Preset::NuscenesLike),
+            _ => Err(format!(
+                "unknown preset {s:?}; expected tiny, demo or nuscenes-like"
+            )),
+        }
+    }
+}
+
+/// Everything that defines a synthetic scene. Start from `SynthConfig::preset`.
+#[derive(Clone, Debug)]
+pub struct SynthConfig {
+    pub preset: Preset,
+    pub seed: u64,
+    pub frames: usize,
+    /// Distance between frames along the road (m); at `speed_mps` this sets the rate.
+    pub frame_spacing_m: f64,
+    pub speed_mps: f64,
+    pub cameras: usize,
+    pub width: u32,
+    pub height: u32,
+    /// Rays per pixel along each axis (2 → 4 rays per pixel).
+    pub rays_per_axis: u32,
+    pub lidar: bool,
+    pub noise: PoseNoise,
+    /// BEV truth resolution (m/pixel) and corridor half-width around the trajectory.
+    pub truth_resolution: f64,
+    pub corridor_half_width: f64,
+    /// Cell of the true heightfield raster (m).
+    pub field_cell: f64,
+}
+
+impl SynthConfig {
+    pub fn preset(preset: Preset, seed: u64) -> Self {
+        let base = SynthConfig {
+            preset,
+            seed,
+            frames: 8,
+            frame_spacing_m: 1.0,
+            speed_mps: 10.0,
+            cameras: 1,
+            width: 64,
+            height: 48,
+            rays_per_axis: 2,
+            lidar: false,
+            noise: PoseNoise::default(),
+            truth_resolution: 0.1,
+            corridor_half_width: 6.0,
+            field_cell: 0.04,
+        };
+        match preset {
+            Preset::Tiny => base,
+            Preset::Demo => SynthConfig {
+                frames: 26,
+                cameras: 3,
+                width: 192,
+                height: 108,
+                truth_resolution: 0.05,
+                ..base
+            },
+            Preset::NuscenesLike => SynthConfig {
+                frames: 240,
+                frame_spacing_m: 0.84,
+                cameras: 6,
+                width: 800,
+                height: 225,
+                truth_resolution: 0.05,
+                corridor_half_width: 8.0,
+                field_cell: 0.05,
+                ..base
+            },
+        }
+    }
+
+    pub fn trajectory_length(&self) -> f64 {
+        (self.frames.max(2) - 1) as f64 * self.frame_spacing_m
+    }
+
+    /// Arc length where the trajectory starts (room behind for rear cameras).
+    fn start_s(&self) -> f64 {
+        20.0
+    }
+}
+
+/// A generated scene: the bundle plus the truth a test may want beyond it.
+pub struct SynthOutput {
+    pub manifest: Manifest,
+    pub files: Vec<BundleFile>,
+    /// The poses the images were rendered from (the manifest has the noisy ones).
+    pub true_poses: Vec<Mat4Rows>,
+    pub world: World,
+}
+
+/// The camera rig, in the nuScenes order; a config with n cameras takes the first n.
+/// (name, yaw°, position in the vehicle frame, horizontal field of view°)
+const RIG: [(&str, f64, [f64; 3], f64); 6] = [
+    ("front", 0.0, [1.7, 0.0, 1.5], 64.0),
+    ("front_left", 55.0, [1.5, 0.5, 1.5], 64.0),
+    ("front_right", -55.0, [1.5, -0.5, 1.5], 64.0),
+    ("back", 180.0, [-0.5, 0.0, 1.5], 90.0),
+    ("back_left", 110.0, [1.0, 0.6, 1.5], 64.0),
+    ("back_right", -110.0, [1.0, -0.6, 1.5], 64.0),
+];
+
+/// The road for a config: straights and arcs (and a 90° turn on long scenes), a speed
+/// table, a crosswalk with stop line and a manhole where the cameras see them.
+pub fn road_spec(cfg: &SynthConfig) -> RoadSpec {
+    let s0 = cfg.start_s();
+    let lt = cfg.trajectory_length();
+    let total = s0 + lt + 45.0;
+    let pieces = if total >= 150.0 {
+        let turn = 20.0 * std::f64::consts::FRAC_PI_2;
+        let a = 0.22 * total;
+        let b = 0.15 * total;
+        let c = 0.12 * total;
+        vec![
+            (a, 0.0),
+            (b, 1.0 / 60.0),
+            (c, 0.0),
+            (turn, -1.0 / 20.0),
+            (total - a - b - c - turn, 0.0),
+        ]
+    } else {
+        vec![
+            (0.35 * total, 0.0),
+            (0.35 * total, 1.0 / 40.0),
+            (0.3 * total, 0.0),
+        ]
+    };
+    RoadSpec {
+        seed: cfg.seed,
+        pieces,
+        slope: 0.02,
+        crossfall: 0.02,
+        vertical_curve_m: 0.25,
+        curb_height: 0.12,
+        bump: Some((s0 + 0.3 * lt + 4.0, 0.08)),
+        crosswalk: Some(s0 + 0.6 * lt + 6.0),
+        manhole: Some((s0 + 0.45 * lt + 3.0, 1.6)),
+    }
+}
+
+/// Progress callback: (stage, done, total).
+pub type Progress<'a> = &'a (dyn Fn(&str, usize, usize) + Sync);
+
+/// Generates the scene. Deterministic for a config (and independent of thread count).
+pub fn generate(cfg: &SynthConfig, progress: Progress) -> Result<SynthOutput, String> {
+    if cfg.frames < 2
+        || cfg.cameras == 0
+        || cfg.cameras > RIG.len()
+        || cfg.width == 0
+        || cfg.height == 0
+    {
+        return Err(format!(
+            "need at least 2 frames, 1 to {} cameras and a non-empty image size (got {} frames, {} cameras, {}×{})",
+            RIG.len(),
+            cfg.frames,
+            cfg.cameras,
+            cfg.width,
+            cfg.height
+        ));
+    }
+    let rng = Rng::new(cfg.seed);
+    let road = road_spec(cfg);
+    let s0 = cfg.start_s();
+    let lt = cfg.trajectory_length();
+    let mut cars = Vec::new();
+    let mut crng = rng.fork(0xca5);
+    let mut s = s0 + 0.5 * lt.min(30.0) + 4.0;
+    let mut side = 1.0;
+    while s < s0 + lt + 30.0 {
+        let albedo = [
+            0.1 + 0.7 * crng.uniform(),
+            0.1 + 0.5 * crng.uniform(),
+            0.1 + 0.6 * crng.uniform(),
+        ];
+        cars.push((s, side * 2.45, 4.4, albedo));
+        s += 22.0 + 20.0 * crng.uniform();
+        side = -side;
+    }
+    progress("world", 0, 1);
+    let world = World::new(road, cfg.field_cell, &cars);
+    progress("world", 1, 1);
+
+    let true_poses: Vec<Mat4Rows> = (0..cfg.frames)
+        .map(|k| vehicle_pose(&world, s0 + k as f64 * cfg.frame_spacing_m))
+        .collect();
+    let poses = noisy_poses(&true_poses, cfg.noise, &rng);
+    let cameras: Vec<Camera> = RIG[..cfg.cameras]
+        .iter()
+        .map(|&(name, yaw, pos, hfov)| {
+            let fx = cfg.width as f64 / 2.0 / (hfov.to_radians() / 2.0).tan();
+            // nuScenes-like crops the top half: the horizon sits on the top edge.
+            let (pitch, cy) = match cfg.preset {
+                Preset::NuscenesLike => (0.0, 0.0),
+                _ => (6.0, 0.3 * cfg.height as f64),
+            };
+            Camera {
+                name: name.into(),
+                width: cfg.width,
+                height: cfg.height,
+                fx,
+                fy: fx,
+                cx: cfg.width as f64 / 2.0,
+                cy,
+                camera_to_vehicle: camera_to_vehicle(yaw, pitch, pos),
+            }
+        })
+        .collect();
+    let mut erng = rng.fork(0xe0);
+    let exposures: Vec<Exposure> = (0..cfg.cameras)
+        .map(|c| {
+            let (g, o) = (erng.uniform(), erng.uniform());
+            if c == 0 {
+                Exposure {
+                    gain: 1.0,
+                    offset: 0.0,
+                }
+            } else {
+                Exposure {
+                    gain: 0.85 + 0.3 * g,
+                    offset: 0.06 * o - 0.03,
+                }
+            }
+        })
+        .collect();
+
+    let views = cfg.frames * cfg.cameras;
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let images: Vec<(Vec<u8>, Vec<u8>)> = par::par_map(views, |i| {
+        let (k, c) = (i / cfg.cameras, i % cfg.cameras);
+        let cam = &cameras[c];
+        let view = raycast::View {
+            width: cam.width,
+            height: cam.height,
+            fx: cam.fx,
+            fy: cam.fy,
+            cx: cam.cx,
+            cy: cam.cy,
+            cam_to_world: mul(&true_poses[k], &cam.camera_to_vehicle),
+        };
+        let (rgb, lab) = render(&world, &view, cfg.rays_per_axis, exposures[c]);
+        let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+        progress("images", n, views);
+        (png_rgb(&rgb), png_gray(&lab))
+    });
+
+    let lidar_to_vehicle = rig::mat(
+        [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        [0.0, 0.0, 1.8],
+    );
+    let sweeps: Vec<Vec<u8>> = if cfg.lidar {
+        par::par_map(cfg.frames, |k| {
+            let pts = lidar_sweep(&world, &mul(&true_poses[k], &lidar_to_vehicle), 32, 0.6);
+            pts.iter()
+                .flat_map(|p| p.iter().flat_map(|v| v.to_le_bytes()))
+                .collect()
+        })
+    } else {
+        Vec::new()
+    };
+
+    let mut files = Vec::new();
+    let mut frames = Vec::new();
+    for (k, pose) in poses.iter().enumerate() {
+        let mut fviews = Vec::new();
+        for cam in &cameras {
+            let image = format!("images/{}/{k:06}.png", cam.name);
+            let label = format!("labels/{}/{k:06}.png", cam.name);
+            fviews.push(View {
+                camera: cam.name.clone(),
+                image,
+                label,
+            });
+        }
+        let lidar = cfg.lidar.then(|| format!("lidar/{k:06}.bin"));
+        frames.push(Frame {
+            timestamp: k as f64 * cfg.frame_spacing_m / cfg.speed_mps,
+            vehicle_to_world: *pose,
+            views: fviews,
+            lidar,
+        });
+    }
+    for (i, (rgb, lab)) in images.into_iter().enumerate() {
+        let v = &frames[i / cfg.cameras].views[i % cfg.cameras];
+        files.push((v.image.clone(), rgb));
+        files.push((v.label.clone(), lab));
+    }
+    for (k, bytes) in sweeps.into_iter().enumerate() {
+        files.push((format!("lidar/{k:06}.bin"), bytes));
+    }
+
+    progress("truth", 0, 1);
+    let gt = truth::rasters(
+        &world,
+        &true_poses,
+        cfg.corridor_half_width,
+        cfg.truth_resolution,
+    );
+    progress("truth", 1, 1);
+    let ground_truth = GroundTruth {
+        origin: gt.origin,
+        resolution: cfg.truth_resolution,
+        width: gt.width,
+        height: gt.height,
+        rgb: "truth/rgb.png".into(),
+        class_ids: "truth/class_ids.png".into(),
+        elevation: "truth/elevation.f32".into(),
+        valid: "truth/valid.png".into(),
+    };
+    files.push((ground_truth.rgb.clone(), png_rgb(&gt.rgb)));
+    files.push((ground_truth.class_ids.clone(), png_gray(&gt.class_ids)));
+    files.push((
+        ground_truth.elevation.clone(),
+        gt.elevation.iter().flat_map(|v| v.to_le_bytes()).collect(),
+    ));
+    files.push((ground_truth.valid.clone(), png_gray(&gt.valid)));
+
+    let manifest = Manifest {
+        format: FORMAT.into(),
+        version: VERSION,
+        name: format!("synthetic {:?} (seed {})", cfg.preset, cfg.seed),
+        vehicle_height_m: 0.0,
+        semantic_classes: classes::table(),
+        cameras,
+        frames,
+        lidar: cfg.lidar.then_some(LidarSensor {
+            floats_per_point: 4,
+            lidar_to_vehicle,
+        }),
+        ground_truth: Some(ground_truth),
+    };
+    Ok(SynthOutput {
+        manifest,
+        files,
+        true_poses,
+        world,
+    })
+}

@@ -1,0 +1,96 @@
+//! Metrics: perfect against themselves, and equal to values computed by hand for
+//! hand-made perturbations. Invalid pixels never count.
+#![cfg(not(target_arch = "wasm32"))]
+
+use rogs::eval::{elevation_vs_points, elevation_vs_raster, error_stats, miou, psnr, BevRaster};
+
+/// 10×10 raster at 0.1 m: left half class 0 (grey 100), right half class 1 (white
+/// 200), elevation 1.0 m; the last row is invalid.
+fn raster() -> BevRaster {
+    let mut r = BevRaster::empty([0.0, 1.0], 0.1, 10, 10);
+    for row in 0..10 {
+        for col in 0..10 {
+            let right = col >= 5;
+            r.rgb.put_pixel(
+                col,
+                row,
+                image::Rgb(if right { [200; 3] } else { [100; 3] }),
+            );
+            r.class_ids.put_pixel(col, row, image::Luma([right as u8]));
+            r.valid
+                .put_pixel(col, row, image::Luma([if row == 9 { 0 } else { 255 }]));
+        }
+    }
+    r.elevation.fill(1.0);
+    r
+}
+
+#[test]
+fn truth_against_itself_is_perfect() {
+    let t = raster();
+    assert_eq!(psnr(&t, &t), Some(f64::INFINITY));
+    assert_eq!(miou(&t, &t, &[0, 1]), Some(1.0));
+    let pts: Vec<[f64; 3]> = (0..9).map(|i| [0.05 + 0.1 * i as f64, 0.55, 1.0]).collect();
+    let e = elevation_vs_raster(&pts, &t).unwrap();
+    assert_eq!((e.rmse, e.mae, e.p95, e.count), (0.0, 0.0, 0.0, 9));
+}
+
+#[test]
+fn psnr_of_a_perturbation_equals_hand_computation() {
+    let t = raster();
+    let mut p = raster();
+    // One valid pixel off by 51 in every channel: MSE = (51/255)² · 3 / (90 · 3).
+    p.rgb.put_pixel(2, 3, image::Rgb([151; 3]));
+    // Invalid pixels do not count, however wrong.
+    p.rgb.put_pixel(4, 9, image::Rgb([0; 3]));
+    let mse = (0.2f64 * 0.2) / 90.0;
+    let expected = -10.0 * mse.log10();
+    assert!((psnr(&p, &t).unwrap() - expected).abs() < 1e-9);
+    // Averaging masked zeros in (the original code's quirk) would give 100 pixels.
+    let quirk = -10.0 * ((0.2f64 * 0.2) / 100.0).log10();
+    assert!((psnr(&p, &t).unwrap() - quirk).abs() > 0.3);
+}
+
+#[test]
+fn miou_of_a_perturbation_equals_hand_computation() {
+    let t = raster();
+    let mut p = raster();
+    // Predict class 1 on 9 valid pixels of class 0 (one column).
+    for row in 0..9 {
+        p.class_ids.put_pixel(4, row, image::Luma([1]));
+    }
+    // Class 0: intersection 36, union 45. Class 1: intersection 45, union 54.
+    let expected = (36.0 / 45.0 + 45.0 / 54.0) / 2.0;
+    assert!((miou(&p, &t, &[0, 1, 2]).unwrap() - expected).abs() < 1e-12);
+    // Class 2 is absent from both and does not count; a non-road class is not scored.
+    assert!((miou(&p, &t, &[0]).unwrap() - 36.0 / 45.0).abs() < 1e-12);
+}
+
+#[test]
+fn elevation_errors_equal_hand_computation() {
+    let t = raster();
+    // Errors 0.1, -0.2, 0.3, 0 (points over valid pixels); one over an invalid row.
+    let pts = [
+        [0.05, 0.95, 1.1],
+        [0.15, 0.95, 0.8],
+        [0.55, 0.55, 1.3],
+        [0.85, 0.25, 1.0],
+        [0.5, 0.05, 9.0],
+    ];
+    let e = elevation_vs_raster(&pts, &t).unwrap();
+    assert_eq!(e.count, 4);
+    assert!((e.rmse - ((0.01 + 0.04 + 0.09) / 4.0f64).sqrt()).abs() < 1e-6);
+    assert!((e.mae - 0.6 / 4.0).abs() < 1e-6);
+    assert!((e.p95 - 0.3).abs() < 1e-6);
+    let mut errs: Vec<f64> = (1..=100).map(|i| i as f64).collect();
+    assert_eq!(error_stats(&mut errs).unwrap().p95, 95.0);
+}
+
+#[test]
+fn elevation_against_points_uses_nearest_within_radius() {
+    let reference = [[0.0, 0.0, 1.0], [0.05, 0.0, 2.0], [1.0, 1.0, 5.0]];
+    // Nearest to (0.04, 0) is the second point (error 0.5); (0.5, 0.5) has none within 0.1 m.
+    let e = elevation_vs_points(&[[0.04, 0.0, 2.5], [0.5, 0.5, 0.0]], &reference, 0.1).unwrap();
+    assert_eq!(e.count, 1);
+    assert!((e.rmse - 0.5).abs() < 1e-12);
+}

@@ -7,6 +7,9 @@
 pub mod bundle;
 pub mod eval;
 pub mod gpu;
+pub mod grid;
+pub mod init;
+pub mod spatial;
 pub mod synth;
 
 #[cfg(not(target_arch = "wasm32"))]

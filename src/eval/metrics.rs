@@ -135,50 +135,13 @@ pub fn elevation_vs_points(
     reference: &[[f64; 3]],
     radius: f64,
 ) -> Option<ErrorStats> {
-    let grid = PointGrid::new(reference, radius);
+    let grid = crate::spatial::PointGrid::new(reference, radius);
     let mut errors: Vec<f64> = points
         .iter()
-        .filter_map(|p| grid.nearest(p[0], p[1], radius).map(|q| p[2] - q[2]))
+        .filter_map(|p| {
+            grid.nearest(p[0], p[1], radius)
+                .map(|q| p[2] - reference[q][2])
+        })
         .collect();
     error_stats(&mut errors)
-}
-
-/// Uniform-grid hash of points in xy, for radius queries.
-pub struct PointGrid<'a> {
-    cell: f64,
-    map: std::collections::HashMap<(i64, i64), Vec<usize>>,
-    pts: &'a [[f64; 3]],
-}
-
-impl<'a> PointGrid<'a> {
-    pub fn new(pts: &'a [[f64; 3]], cell: f64) -> Self {
-        let mut map: std::collections::HashMap<(i64, i64), Vec<usize>> = Default::default();
-        for (i, p) in pts.iter().enumerate() {
-            map.entry(((p[0] / cell).floor() as i64, (p[1] / cell).floor() as i64))
-                .or_default()
-                .push(i);
-        }
-        Self { cell, map, pts }
-    }
-
-    pub fn nearest(&self, x: f64, y: f64, radius: f64) -> Option<[f64; 3]> {
-        let (ci, cj) = (
-            (x / self.cell).floor() as i64,
-            (y / self.cell).floor() as i64,
-        );
-        let reach = (radius / self.cell).ceil() as i64;
-        let mut best: Option<(f64, usize)> = None;
-        for j in cj - reach..=cj + reach {
-            for i in ci - reach..=ci + reach {
-                for &k in self.map.get(&(i, j)).into_iter().flatten() {
-                    let p = self.pts[k];
-                    let d = (p[0] - x).hypot(p[1] - y);
-                    if d <= radius && best.is_none_or(|b| d < b.0) {
-                        best = Some((d, k));
-                    }
-                }
-            }
-        }
-        best.map(|b| self.pts[b.1])
-    }
 }

@@ -1,0 +1,240 @@
+//! Inverse perspective mapping: world points on the initial surface projected into
+//! the camera views that see them best (the nearest frames' cameras, smallest depth,
+//! not covered by an ignore class). Used by adaptive refinement, and as the baseline
+//! map (an RGB/label mosaic of the images draped on the initial surface) that the
+//! optimiser's result is compared with.
+
+use super::PoseIndex;
+use crate::bundle::{Bundle, ClassRole, Manifest, Mat4Rows, Problem};
+use crate::eval::BevRaster;
+use crate::grid::Grid;
+use image::{GrayImage, RgbImage};
+use std::collections::HashMap;
+
+/// One camera image of one frame, ready to project into.
+pub struct CamView {
+    pub frame: usize,
+    pub view: usize,
+    world_to_cam: Mat4Rows,
+    pub fx: f64,
+    fy: f64,
+    cx: f64,
+    cy: f64,
+    w: f64,
+    h: f64,
+}
+
+/// Where a world point lands in a view.
+#[derive(Clone, Copy, Debug)]
+pub struct Projection {
+    pub cam: u32,
+    pub u: f32,
+    pub v: f32,
+    pub depth: f32,
+}
+
+/// All views of a bundle, by frame.
+pub struct Cams {
+    pub list: Vec<CamView>,
+    by_frame: Vec<Vec<usize>>,
+}
+
+fn mul(a: &Mat4Rows, b: &Mat4Rows) -> Mat4Rows {
+    let mut m = [[0.0; 4]; 4];
+    for (i, row) in m.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            *v = (0..4).map(|k| a[i][k] * b[k][j]).sum();
+        }
+    }
+    m
+}
+
+fn rigid_inverse(a: &Mat4Rows) -> Mat4Rows {
+    let mut m = [[0.0; 4]; 4];
+    for i in 0..3 {
+        for j in 0..3 {
+            m[i][j] = a[j][i];
+        }
+        m[i][3] = -(0..3).map(|k| a[k][i] * a[k][3]).sum::<f64>();
+    }
+    m[3][3] = 1.0;
+    m
+}
+
+/// Nearer than this a point is behind the lens or distorted beyond use.
+const MIN_DEPTH: f64 = 0.5;
+/// Farther than this a road point is a few pixels wide at best.
+const MAX_DEPTH: f64 = 35.0;
+
+impl Cams {
+    pub fn new(m: &Manifest) -> Self {
+        let mut list = Vec::new();
+        let mut by_frame = Vec::new();
+        for (fi, f) in m.frames.iter().enumerate() {
+            let mut ids = Vec::new();
+            for (vi, v) in f.views.iter().enumerate() {
+                let Some(c) = m.camera(&v.camera) else {
+                    continue;
+                };
+                ids.push(list.len());
+                list.push(CamView {
+                    frame: fi,
+                    view: vi,
+                    world_to_cam: rigid_inverse(&mul(&f.vehicle_to_world, &c.camera_to_vehicle)),
+                    fx: c.fx,
+                    fy: c.fy,
+                    cx: c.cx,
+                    cy: c.cy,
+                    w: c.width as f64,
+                    h: c.height as f64,
+                });
+            }
+            by_frame.push(ids);
+        }
+        Self { list, by_frame }
+    }
+
+    /// Pixel position and depth of world point `p` in camera `c`, if inside the image.
+    pub fn project(&self, c: usize, p: [f64; 3]) -> Option<Projection> {
+        let v = &self.list[c];
+        let m = &v.world_to_cam;
+        let q = [0, 1, 2].map(|i| m[i][0] * p[0] + m[i][1] * p[1] + m[i][2] * p[2] + m[i][3]);
+        if !(MIN_DEPTH..MAX_DEPTH).contains(&q[2]) {
+            return None;
+        }
+        let u = v.fx * q[0] / q[2] + v.cx;
+        let vv = v.fy * q[1] / q[2] + v.cy;
+        (u >= 1.0 && vv >= 1.0 && u < v.w - 1.0 && vv < v.h - 1.0).then_some(Projection {
+            cam: c as u32,
+            u: u as f32,
+            v: vv as f32,
+            depth: q[2] as f32,
+        })
+    }
+
+    /// Up to `n` views of `p` among the cameras of its `frames` nearest frames,
+    /// nearest (smallest depth) first.
+    pub fn candidates(
+        &self,
+        poses: &PoseIndex,
+        p: [f64; 3],
+        frames: usize,
+        n: usize,
+    ) -> Vec<Projection> {
+        let mut out: Vec<Projection> = poses
+            .nearest(p[0], p[1], frames)
+            .into_iter()
+            .flat_map(|(_, f)| {
+                self.by_frame[f]
+                    .iter()
+                    .filter_map(|&c| self.project(c, p))
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+        out.sort_by(|a, b| a.depth.total_cmp(&b.depth));
+        out.truncate(n);
+        out
+    }
+}
+
+/// Decoded images of one view.
+pub struct ViewImages {
+    pub rgb: RgbImage,
+    pub label: GrayImage,
+}
+
+/// For every point, calls `f(point, images, projection)` with the best candidate view
+/// whose pixel is not an ignore class (trying the next candidate otherwise). Each view
+/// is decoded once per pass; returns how many points found a usable view.
+pub fn sample_best<F>(
+    b: &Bundle,
+    cams: &Cams,
+    candidates: &[Vec<Projection>],
+    mut f: F,
+) -> Result<usize, Problem>
+where
+    F: FnMut(usize, &ViewImages, &Projection),
+{
+    let m = &b.manifest;
+    let ignore: Vec<bool> = (0..=255u8)
+        .map(|id| {
+            m.semantic_classes
+                .iter()
+                .any(|c| c.id == id && c.role == ClassRole::Ignore)
+        })
+        .collect();
+    let mut pending: Vec<(usize, usize)> = (0..candidates.len())
+        .filter(|&i| !candidates[i].is_empty())
+        .map(|i| (i, 0))
+        .collect();
+    let mut found = 0;
+    while !pending.is_empty() {
+        let mut by_cam: HashMap<u32, Vec<(usize, usize)>> = HashMap::new();
+        for &(i, r) in &pending {
+            by_cam.entry(candidates[i][r].cam).or_default().push((i, r));
+        }
+        let mut keys: Vec<u32> = by_cam.keys().copied().collect();
+        keys.sort_unstable();
+        let mut next = Vec::new();
+        for c in keys {
+            let cv = &cams.list[c as usize];
+            let view = &m.frames[cv.frame].views[cv.view];
+            let imgs = ViewImages {
+                rgb: b.read_rgb(&view.image)?,
+                label: b.read_label(&view.label)?,
+            };
+            for &(i, r) in &by_cam[&c] {
+                let p = &candidates[i][r];
+                let class = imgs.label.get_pixel(p.u as u32, p.v as u32).0[0];
+                if ignore[class as usize] {
+                    if r + 1 < candidates[i].len() {
+                        next.push((i, r + 1));
+                    }
+                    continue;
+                }
+                f(i, &imgs, p);
+                found += 1;
+            }
+        }
+        pending = next;
+    }
+    Ok(found)
+}
+
+/// The IPM baseline map: for every base vertex of the grid, the colour and label of
+/// its best view, on a raster whose pixel centres are the base vertices.
+pub fn mosaic(b: &Bundle, grid: &Grid, z: &[f32], poses: &PoseIndex) -> Result<BevRaster, Problem> {
+    let cams = Cams::new(&b.manifest);
+    let res = grid.resolution;
+    let (mut i1, mut j1) = (0, 0);
+    for c in &grid.coords {
+        i1 = i1.max(c[0] / 2);
+        j1 = j1.max(c[1] / 2);
+    }
+    let (w, h) = (i1 as u32 + 1, j1 as u32 + 1);
+    let origin = [
+        grid.origin[0] - 0.5 * res,
+        grid.origin[1] + (j1 as f64 + 0.5) * res,
+    ];
+    let mut out = BevRaster::empty(origin, res, w, h);
+    let base: Vec<usize> = (0..grid.len()).filter(|&k| grid.level[k] == 0).collect();
+    let candidates: Vec<Vec<Projection>> = base
+        .iter()
+        .map(|&k| {
+            let [x, y] = grid.xy(k);
+            cams.candidates(poses, [x, y, z[k] as f64], 4, 3)
+        })
+        .collect();
+    sample_best(b, &cams, &candidates, |i, imgs, p| {
+        let k = base[i];
+        let [ci, cj] = grid.coords[k];
+        let (col, row) = ((ci / 2) as u32, (j1 - cj / 2) as u32);
+        out.rgb
+            .put_pixel(col, row, *imgs.rgb.get_pixel(p.u as u32, p.v as u32));
+        out.class_ids
+            .put_pixel(col, row, *imgs.label.get_pixel(p.u as u32, p.v as u32));
+        out.elevation[(row * w + col) as usize] = z[k];
+        out.valid.put_pixel(col, row, image::Luma([255]));
+    })?;
+    Ok(out)
+}

@@ -1,0 +1,143 @@
+//! Grid → initialisation → refinement → surfels: everything before optimisation,
+//! with the surfel count and memory reported before allocation.
+
+use super::refine::{refine, RefineConfig, RefineReport};
+use super::{initialise, initialise_into, InitConfig, InitResult, PoseIndex, PosePlanes};
+use crate::bundle::{Bundle, Mat4Rows, Problem};
+use crate::grid::{Grid, GridConfig, GridError, Surfels};
+use crate::spatial::PointGrid;
+use serde::Serialize;
+use thiserror::Error;
+use web_time::Instant;
+
+#[derive(Clone, Debug, Default)]
+pub struct PrepareConfig {
+    pub grid: GridConfig,
+    pub init: InitConfig,
+    pub refine: RefineConfig,
+    /// Use the bundle's LiDAR (when it has any) for the refinement's height cue.
+    pub use_lidar: bool,
+}
+
+#[derive(Debug, Error)]
+pub enum PrepareError {
+    #[error(transparent)]
+    Grid(#[from] GridError),
+    #[error(transparent)]
+    Bundle(#[from] Problem),
+}
+
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct PrepareReport {
+    pub base_surfels: usize,
+    pub added_surfels: usize,
+    pub surfels: usize,
+    pub bytes_per_surfel: u64,
+    pub surfel_bytes: u64,
+    pub index_map_bytes: usize,
+    pub refine: RefineReport,
+    pub grid_ms: f64,
+    pub init_ms: f64,
+    pub refine_ms: f64,
+}
+
+pub struct Prepared {
+    pub grid: Grid,
+    pub surfels: Surfels,
+    pub init: InitResult,
+    /// Refined base cells (lower-left fine coordinates), for the density layer.
+    pub refined_cells: Vec<[i32; 2]>,
+    pub report: PrepareReport,
+}
+
+fn apply(a: &Mat4Rows, p: [f64; 3]) -> [f64; 3] {
+    [0, 1, 2].map(|i| a[i][0] * p[0] + a[i][1] * p[1] + a[i][2] * p[2] + a[i][3])
+}
+
+/// Every LiDAR point of the bundle in the world frame (through the bundle's poses),
+/// with the index of the sweep it came from.
+pub fn lidar_world(b: &Bundle) -> Result<(Vec<[f64; 3]>, Vec<u32>), Problem> {
+    let m = &b.manifest;
+    let Some(sensor) = &m.lidar else {
+        return Ok((Vec::new(), Vec::new()));
+    };
+    let (mut out, mut sweep) = (Vec::new(), Vec::new());
+    for (k, f) in m.frames.iter().enumerate() {
+        let Some(path) = &f.lidar else { continue };
+        let t = &f.vehicle_to_world;
+        for p in b.read_lidar(path)? {
+            out.push(apply(
+                t,
+                apply(&sensor.lidar_to_vehicle, p.map(|v| v as f64)),
+            ));
+            sweep.push(k as u32);
+        }
+    }
+    Ok((out, sweep))
+}
+
+pub fn prepare(b: &Bundle, cfg: &PrepareConfig) -> Result<Prepared, PrepareError> {
+    let m = &b.manifest;
+    // One logit per class of the table (dense index, not the class id).
+    let classes = m.semantic_classes.len().max(1);
+    let bps = Surfels::bytes_per_surfel(classes);
+    let t0 = Instant::now();
+    let planes = PosePlanes::from_manifest(m);
+    let path: Vec<[f64; 2]> = planes.ground.iter().map(|g| [g[0], g[1]]).collect();
+    let mut grid = Grid::corridor(&path, &cfg.grid, bps)?;
+    let grid_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let t1 = Instant::now();
+    let poses = PoseIndex::new(&planes);
+    let mut init = initialise(&grid, &poses, &cfg.init);
+    let base = grid.len();
+    let init_ms = t1.elapsed().as_secs_f64() * 1e3;
+    let t2 = Instant::now();
+    let (lidar_pts, sweeps) = if cfg.use_lidar {
+        lidar_world(b)?
+    } else {
+        Default::default()
+    };
+    let lidar = (!lidar_pts.is_empty()).then(|| {
+        (
+            PointGrid::new(&lidar_pts, cfg.grid.resolution),
+            sweeps.as_slice(),
+        )
+    });
+    let (refine_report, refined_cells) = refine(
+        b,
+        &mut grid,
+        &init.z,
+        &poses,
+        lidar.as_ref().map(|(g, s)| (g, *s)),
+        &cfg.refine,
+    )?;
+    initialise_into(&grid, &poses, &cfg.init, base, &mut init);
+    let refine_ms = t2.elapsed().as_secs_f64() * 1e3;
+    let surfels = Surfels::new(
+        &grid,
+        classes,
+        &init.z,
+        &init.z_hat,
+        &init.q,
+        &init.rotation,
+    );
+    let report = PrepareReport {
+        base_surfels: base,
+        added_surfels: grid.len() - base,
+        surfels: grid.len(),
+        bytes_per_surfel: bps,
+        surfel_bytes: bps * grid.len() as u64,
+        index_map_bytes: grid.index.bytes(),
+        refine: refine_report,
+        grid_ms,
+        init_ms,
+        refine_ms,
+    };
+    Ok(Prepared {
+        grid,
+        surfels,
+        init,
+        refined_cells,
+        report,
+    })
+}

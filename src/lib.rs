@@ -9,6 +9,7 @@ pub mod eval;
 pub mod gpu;
 pub mod grid;
 pub mod init;
+pub mod render;
 pub mod spatial;
 pub mod synth;
 

@@ -1,5 +1,6 @@
 //! The native command line: `rogs <command>`. Each command lives in its own file.
 
+mod bench;
 mod eval;
 mod example;
 mod gpu;
@@ -62,6 +63,9 @@ enum Command {
     /// it has none (elevation then against the nearest LiDAR point within 0.1 m in
     /// xy). Prints {"metrics": {...}} as JSON.
     Eval(eval::Args),
+    /// Benchmarks: measured speed and memory, median of several runs.
+    #[command(subcommand)]
+    Bench(bench::Bench),
 }
 
 pub fn run() -> ExitCode {
@@ -72,6 +76,7 @@ pub fn run() -> ExitCode {
         Command::Example(a) => example::run(a),
         Command::Synth(a) => synth::run(a),
         Command::Eval(a) => eval::run(a),
+        Command::Bench(b) => bench::run(b),
     };
     match result {
         Ok(code) => code,

@@ -47,6 +47,10 @@ pub struct Args {
     /// BEV truth resolution, metres per pixel.
     #[arg(long)]
     truth_resolution: Option<f64>,
+    /// Rays per pixel along each axis (default 2, i.e. 4 rays per pixel; 1 is faster
+    /// but aliased).
+    #[arg(long)]
+    rays_per_axis: Option<u32>,
     /// Also write a PNG contact sheet of some frames (images left, labels right).
     #[arg(long)]
     contact_sheet: Option<PathBuf>,
@@ -65,6 +69,7 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
     cfg.width = a.width.unwrap_or(cfg.width);
     cfg.height = a.height.unwrap_or(cfg.height);
     cfg.truth_resolution = a.truth_resolution.unwrap_or(cfg.truth_resolution);
+    cfg.rays_per_axis = a.rays_per_axis.unwrap_or(cfg.rays_per_axis).max(1);
     let t0 = std::time::Instant::now();
     let bar = Mutex::new(Progress::new("rendering"));
     let out = generate(&cfg, &|stage, done, total| {

@@ -10,6 +10,8 @@
 //! `rasterize_backward` ↔ `rasterize_backward.rs`, `project_backward` ↔
 //! `project_backward.rs`. The oracle is written to be read, not to be fast.
 
+pub mod check;
+pub mod gpu;
 pub mod project;
 pub mod project_backward;
 pub mod rasterize;

@@ -1,0 +1,92 @@
+//! project: per surfel, cull to the box in front of the camera, transform centre,
+//! tangent axes and normal to camera space, project the centre, and bound the ±3σ
+//! footprint (and the ±2 px low-pass floor) in tiles. Writes the projected surfel and
+//! its tile count (0 when culled). One invocation per surfel, 256 per workgroup
+//! (the browser maximum), 2D grid for more than 65535 workgroups.
+//!
+//! Oracle: src/render/project.rs.
+
+@group(0) @binding(0) var<uniform> view: View;
+@group(0) @binding(1) var<storage, read> pos: array<f32>;
+@group(0) @binding(2) var<storage, read> rotation: array<f32>;
+@group(0) @binding(3) var<storage, read> log_scale: array<f32>;
+@group(0) @binding(4) var<storage, read> opacity: array<f32>;
+@group(0) @binding(5) var<storage, read_write> proj: array<f32>;
+@group(0) @binding(6) var<storage, read_write> tile_count: array<u32>;
+@group(0) @binding(7) var<uniform> grid: vec4<u32>;
+
+fn to_cam(p: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(dot(view.w2c0.xyz, p) + view.w2c0.w, dot(view.w2c1.xyz, p) + view.w2c1.w, dot(view.w2c2.xyz, p) + view.w2c2.w);
+}
+
+fn rot_to_cam(v: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(dot(view.w2c0.xyz, v), dot(view.w2c1.xyz, v), dot(view.w2c2.xyz, v));
+}
+
+@compute @workgroup_size(256)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let i = gid.x + gid.y * grid.x;
+    if i >= view.count {
+        return;
+    }
+    tile_count[i] = 0u;
+    let pc = to_cam(vec3<f32>(pos[3u * i], pos[3u * i + 1u], pos[3u * i + 2u]));
+    if pc.z < view.near || pc.z > view.far || abs(pc.x) > view.half_width {
+        return;
+    }
+    let q4 = vec4<f32>(rotation[4u * i], rotation[4u * i + 1u], rotation[4u * i + 2u], rotation[4u * i + 3u]);
+    let qn = q4 / sqrt(dot(q4, q4));
+    let w = qn.x;
+    let x = qn.y;
+    let y = qn.z;
+    let z = qn.w;
+    let tu = rot_to_cam(vec3<f32>(1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + w * z), 2.0 * (x * z - w * y)));
+    let tv = rot_to_cam(vec3<f32>(2.0 * (x * y - w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + w * x)));
+    let n = rot_to_cam(vec3<f32>(2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y)));
+    let su = exp(log_scale[2u * i]);
+    let sv = exp(log_scale[2u * i + 1u]);
+    let mu = vec2<f32>(view.fx * pc.x / pc.z + view.cx, view.fy * pc.y / pc.z + view.cy);
+    var lo = mu - vec2<f32>(2.0);
+    var hi = mu + vec2<f32>(2.0);
+    for (var c = 0u; c < 4u; c++) {
+        let a = select(-1.0, 1.0, (c & 1u) != 0u);
+        let b = select(-1.0, 1.0, (c & 2u) != 0u);
+        let corner = pc + a * EXTENT_SIGMA * su * tu + b * EXTENT_SIGMA * sv * tv;
+        let cz = max(corner.z, 0.1 * view.near);
+        let uv = vec2<f32>(view.fx * corner.x / cz + view.cx, view.fy * corner.y / cz + view.cy);
+        lo = min(lo, uv);
+        hi = max(hi, uv);
+    }
+    let wh = vec2<f32>(f32(view.width), f32(view.height));
+    if hi.x < 0.0 || hi.y < 0.0 || lo.x >= wh.x || lo.y >= wh.y {
+        return;
+    }
+    let t = f32(TILE);
+    let tx0 = u32(clamp(floor(lo.x / t), 0.0, f32(view.tiles_x)));
+    let ty0 = u32(clamp(floor(lo.y / t), 0.0, f32(view.tiles_y)));
+    let tx1 = u32(clamp(floor(hi.x / t), 0.0, f32(view.tiles_x - 1u))) + 1u;
+    let ty1 = u32(clamp(floor(hi.y / t), 0.0, f32(view.tiles_y - 1u))) + 1u;
+    let o = PROJ_STRIDE * i;
+    proj[o] = pc.x;
+    proj[o + 1u] = pc.y;
+    proj[o + 2u] = pc.z;
+    proj[o + 3u] = su;
+    proj[o + 4u] = tu.x;
+    proj[o + 5u] = tu.y;
+    proj[o + 6u] = tu.z;
+    proj[o + 7u] = sv;
+    proj[o + 8u] = tv.x;
+    proj[o + 9u] = tv.y;
+    proj[o + 10u] = tv.z;
+    proj[o + 11u] = 1.0 / (1.0 + exp(-opacity[i]));
+    proj[o + 12u] = n.x;
+    proj[o + 13u] = n.y;
+    proj[o + 14u] = n.z;
+    proj[o + 16u] = mu.x;
+    proj[o + 17u] = mu.y;
+    proj[o + 18u] = bitcast<f32>(tx0);
+    proj[o + 19u] = bitcast<f32>(ty0);
+    proj[o + 20u] = bitcast<f32>(tx1);
+    proj[o + 21u] = bitcast<f32>(ty1);
+    tile_count[i] = (tx1 - tx0) * (ty1 - ty0);
+}

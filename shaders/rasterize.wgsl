@@ -1,0 +1,114 @@
+//! rasterize (forward): one workgroup per 16×16 tile, one invocation per pixel. The
+//! tile's depth-sorted surfels are loaded 256 at a time into workgroup memory (each
+//! invocation fetches one), then every pixel composites the batch front to back,
+//! evaluating each surfel where its ray meets the surfel's plane (`eval_surfel`),
+//! stopping once transmittance would drop below 1e-4. Logits have a runtime channel
+//! count, so they accumulate in the output buffer rather than in registers.
+//!
+//! Oracle: src/render/rasterize.rs.
+
+@group(0) @binding(0) var<uniform> view: View;
+@group(0) @binding(1) var<storage, read> proj: array<f32>;
+@group(0) @binding(2) var<storage, read> order: array<u32>;
+@group(0) @binding(3) var<storage, read> ranges: array<u32>;
+@group(0) @binding(4) var<storage, read> rgb: array<f32>;
+@group(0) @binding(5) var<storage, read> logits: array<f32>;
+@group(0) @binding(6) var<storage, read_write> out_rgb: array<f32>;
+@group(0) @binding(7) var<storage, read_write> out_logits: array<f32>;
+@group(0) @binding(8) var<storage, read_write> out_depth: array<f32>;
+@group(0) @binding(9) var<storage, read_write> out_alpha: array<f32>;
+@group(0) @binding(10) var<storage, read_write> t_final: array<f32>;
+@group(0) @binding(11) var<storage, read_write> last: array<u32>;
+@group(0) @binding(12) var<storage, read_write> colour: array<f32>;
+
+var<workgroup> batch: array<Surfel, 256>;
+var<workgroup> batch_id: array<u32, 256>;
+var<workgroup> range: vec2<u32>;
+
+fn load_surfel(i: u32) -> Surfel {
+    let o = PROJ_STRIDE * i;
+    var s: Surfel;
+    s.pc = vec3<f32>(proj[o], proj[o + 1u], proj[o + 2u]);
+    s.su = proj[o + 3u];
+    s.tu = vec3<f32>(proj[o + 4u], proj[o + 5u], proj[o + 6u]);
+    s.sv = proj[o + 7u];
+    s.tv = vec3<f32>(proj[o + 8u], proj[o + 9u], proj[o + 10u]);
+    s.opacity = proj[o + 11u];
+    s.n = vec3<f32>(proj[o + 12u], proj[o + 13u], proj[o + 14u]);
+    s.mu = vec2<f32>(proj[o + 16u], proj[o + 17u]);
+    return s;
+}
+
+@compute @workgroup_size(16, 16)
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+    let tile = wg.x + wg.y * view.tiles_x;
+    let x = wg.x * TILE + lid.x;
+    let y = wg.y * TILE + lid.y;
+    let inside = x < view.width && y < view.height;
+    let pix = y * view.width + x;
+    let ch = view.channels;
+    if li == 0u {
+        range = vec2<u32>(ranges[2u * tile], ranges[2u * tile + 1u]);
+    }
+    let r = workgroupUniformLoad(&range);
+    if inside {
+        for (var j = 0u; j < ch; j++) {
+            out_logits[pix * ch + j] = 0.0;
+        }
+    }
+    let px = f32(x) + 0.5;
+    let py = f32(y) + 0.5;
+    var t = 1.0;
+    var c = vec3<f32>(0.0);
+    var depth = 0.0;
+    var last_k = 0u;
+    var done = !inside;
+    let batches = (r.y - r.x + 255u) / 256u;
+    for (var b = 0u; b < batches; b++) {
+        let base = r.x + b * 256u;
+        let k = base + li;
+        if k < r.y {
+            let id = order[k];
+            batch_id[li] = id;
+            batch[li] = load_surfel(id);
+        }
+        workgroupBarrier();
+        if !done {
+            let m = min(256u, r.y - base);
+            for (var j = 0u; j < m; j++) {
+                let s = batch[j];
+                let e = eval_surfel(s, px, py, view);
+                if e.alpha < MIN_ALPHA {
+                    continue;
+                }
+                let t_next = t * (1.0 - e.alpha);
+                if t_next < MIN_TRANSMITTANCE {
+                    done = true;
+                    break;
+                }
+                let w = e.alpha * t;
+                let id = batch_id[j];
+                c += vec3<f32>(rgb[3u * id], rgb[3u * id + 1u], rgb[3u * id + 2u]) * w;
+                for (var q = 0u; q < ch; q++) {
+                    out_logits[pix * ch + q] += logits[id * ch + q] * w;
+                }
+                depth += s.pc.z * w;
+                t = t_next;
+                last_k = base + j + 1u;
+            }
+        }
+        workgroupBarrier();
+    }
+    if !inside {
+        return;
+    }
+    let gain = exp(view.exposure_a);
+    for (var j = 0u; j < 3u; j++) {
+        colour[3u * pix + j] = c[j];
+        out_rgb[3u * pix + j] = gain * c[j] + view.exposure_b;
+    }
+    out_depth[pix] = depth;
+    out_alpha[pix] = 1.0 - t;
+    t_final[pix] = t;
+    last[pix] = last_k;
+}

@@ -1,0 +1,191 @@
+//! rasterize_backward: the forward kernel's pairs traversed back to front. One
+//! workgroup per tile; batches of 256 surfels are loaded from the end of the tile's
+//! list; each pixel walks the batch in reverse over the entries it composited (below
+//! its `last`), recovering transmittance by division (alpha ≤ 0.99 keeps it stable),
+//! and adds its share of each camera-space gradient with `accum_add` (native f32
+//! atomics, or CAS in browsers; `accum` is bound at 0 by the prepended snippet). The
+//! exposure gradient is reduced over the workgroup first, then added once.
+//! Logit accumulators (runtime channel count) live in a per-pixel scratch buffer.
+//!
+//! Oracle: src/render/rasterize_backward.rs; slot layout `slot::*` there.
+
+@group(0) @binding(1) var<uniform> view: View;
+@group(0) @binding(2) var<storage, read> proj: array<f32>;
+@group(0) @binding(3) var<storage, read> order: array<u32>;
+@group(0) @binding(4) var<storage, read> ranges: array<u32>;
+@group(0) @binding(5) var<storage, read> rgb: array<f32>;
+@group(0) @binding(6) var<storage, read> logits: array<f32>;
+@group(0) @binding(7) var<storage, read> t_final: array<f32>;
+@group(0) @binding(8) var<storage, read> last: array<u32>;
+@group(0) @binding(9) var<storage, read> colour: array<f32>;
+@group(0) @binding(10) var<storage, read> g_rgb: array<f32>;
+@group(0) @binding(11) var<storage, read> g_logits: array<f32>;
+@group(0) @binding(12) var<storage, read> g_depth: array<f32>;
+@group(0) @binding(13) var<storage, read> g_alpha: array<f32>;
+@group(0) @binding(14) var<storage, read_write> scratch: array<f32>;
+
+const S_PC: u32 = 0u;
+const S_TU: u32 = 3u;
+const S_TV: u32 = 6u;
+const S_N: u32 = 9u;
+const S_SU: u32 = 12u;
+const S_SV: u32 = 13u;
+const S_OPACITY: u32 = 14u;
+const S_RGB: u32 = 15u;
+const S_LOGITS: u32 = 18u;
+
+var<workgroup> batch: array<Surfel, 256>;
+var<workgroup> batch_id: array<u32, 256>;
+var<workgroup> range: vec2<u32>;
+var<workgroup> red: array<vec2<f32>, 256>;
+
+fn load_surfel(i: u32) -> Surfel {
+    let o = PROJ_STRIDE * i;
+    var s: Surfel;
+    s.pc = vec3<f32>(proj[o], proj[o + 1u], proj[o + 2u]);
+    s.su = proj[o + 3u];
+    s.tu = vec3<f32>(proj[o + 4u], proj[o + 5u], proj[o + 6u]);
+    s.sv = proj[o + 7u];
+    s.tv = vec3<f32>(proj[o + 8u], proj[o + 9u], proj[o + 10u]);
+    s.opacity = proj[o + 11u];
+    s.n = vec3<f32>(proj[o + 12u], proj[o + 13u], proj[o + 14u]);
+    s.mu = vec2<f32>(proj[o + 16u], proj[o + 17u]);
+    return s;
+}
+
+fn add3(base: u32, v: vec3<f32>) {
+    accum_add(base, v.x);
+    accum_add(base + 1u, v.y);
+    accum_add(base + 2u, v.z);
+}
+
+@compute @workgroup_size(16, 16)
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+    let tile = wg.x + wg.y * view.tiles_x;
+    let x = wg.x * TILE + lid.x;
+    let y = wg.y * TILE + lid.y;
+    let inside = x < view.width && y < view.height;
+    let pix = y * view.width + x;
+    let ch = view.channels;
+    let stride = S_LOGITS + ch;
+    if li == 0u {
+        range = vec2<u32>(ranges[2u * tile], ranges[2u * tile + 1u]);
+    }
+    let r = workgroupUniformLoad(&range);
+    let px = f32(x) + 0.5;
+    let py = f32(y) + 0.5;
+    let gain = exp(view.exposure_a);
+    var dc = vec3<f32>(0.0);
+    var dexp = vec2<f32>(0.0);
+    var dd = 0.0;
+    var t_fin = 1.0;
+    var da_out = 0.0;
+    var my_last = 0u;
+    if inside {
+        let go = vec3<f32>(g_rgb[3u * pix], g_rgb[3u * pix + 1u], g_rgb[3u * pix + 2u]);
+        dc = gain * go;
+        let col = vec3<f32>(colour[3u * pix], colour[3u * pix + 1u], colour[3u * pix + 2u]);
+        dexp = vec2<f32>(dot(go * gain, col), go.x + go.y + go.z);
+        dd = g_depth[pix];
+        t_fin = t_final[pix];
+        da_out = g_alpha[pix];
+        my_last = last[pix];
+        for (var j = 0u; j < 2u * ch; j++) {
+            scratch[pix * 2u * ch + j] = 0.0;
+        }
+    }
+    var t = t_fin;
+    var acc_c = vec3<f32>(0.0);
+    var last_c = vec3<f32>(0.0);
+    var last_alpha = 0.0;
+    var acc_d = 0.0;
+    var last_d = 0.0;
+    let batches = (r.y - r.x + 255u) / 256u;
+    for (var bb = 0u; bb < batches; bb++) {
+        let b = batches - 1u - bb;
+        let base = r.x + b * 256u;
+        let k = base + li;
+        if k < r.y {
+            let id = order[k];
+            batch_id[li] = id;
+            batch[li] = load_surfel(id);
+        }
+        workgroupBarrier();
+        let m = min(256u, r.y - base);
+        for (var jj = 0u; jj < m; jj++) {
+            let j = m - 1u - jj;
+            if !inside || base + j >= my_last {
+                continue;
+            }
+            let s = batch[j];
+            let e = eval_surfel(s, px, py, view);
+            if e.alpha < MIN_ALPHA {
+                continue;
+            }
+            let id = batch_id[j];
+            t = t / (1.0 - e.alpha);
+            let w = e.alpha * t;
+            let g0 = stride * id;
+            let c = vec3<f32>(rgb[3u * id], rgb[3u * id + 1u], rgb[3u * id + 2u]);
+            acc_c = last_alpha * last_c + (1.0 - last_alpha) * acc_c;
+            last_c = c;
+            var d_alpha = dot(c - acc_c, dc);
+            add3(g0 + S_RGB, w * dc);
+            let sp = pix * 2u * ch;
+            for (var q = 0u; q < ch; q++) {
+                let l = logits[id * ch + q];
+                let acc = last_alpha * scratch[sp + ch + q] + (1.0 - last_alpha) * scratch[sp + q];
+                scratch[sp + q] = acc;
+                scratch[sp + ch + q] = l;
+                let dl = g_logits[pix * ch + q];
+                d_alpha += (l - acc) * dl;
+                accum_add(g0 + S_LOGITS + q, w * dl);
+            }
+            acc_d = last_alpha * last_d + (1.0 - last_alpha) * acc_d;
+            last_d = s.pc.z;
+            d_alpha += (s.pc.z - acc_d) * dd;
+            d_alpha = d_alpha * t + t_fin / (1.0 - e.alpha) * da_out;
+            last_alpha = e.alpha;
+            var dpc = vec3<f32>(0.0, 0.0, w * dd);
+            if e.raw_alpha <= MAX_ALPHA {
+                let sig = s.opacity;
+                accum_add(g0 + S_OPACITY, d_alpha * e.g * sig * (1.0 - sig));
+                let d_rho = d_alpha * sig * -0.5 * e.g;
+                if e.ray_hit {
+                    let gu = d_rho * 2.0 * e.u;
+                    let gv = d_rho * 2.0 * e.v;
+                    accum_add(g0 + S_SU, -gu * e.u / s.su);
+                    accum_add(g0 + S_SV, -gv * e.v / s.sv);
+                    add3(g0 + S_TU, gu * e.q / s.su);
+                    add3(g0 + S_TV, gv * e.q / s.sv);
+                    let gq = gu * s.tu / s.su + gv * s.tv / s.sv;
+                    let nd = dot(s.n, e.d);
+                    let d_lambda = dot(gq, e.d);
+                    dpc += -gq + d_lambda * s.n / nd;
+                    add3(g0 + S_N, d_lambda * (s.pc - e.d * e.lambda) / nd);
+                } else {
+                    let k2 = -2.0 * LOWPASS_INV_SQ * d_rho;
+                    let dmu = k2 * e.delta;
+                    let z = s.pc.z;
+                    dpc += vec3<f32>(dmu.x * view.fx / z, dmu.y * view.fy / z, -(dmu.x * view.fx * s.pc.x + dmu.y * view.fy * s.pc.y) / (z * z));
+                }
+            }
+            add3(g0 + S_PC, dpc);
+        }
+        workgroupBarrier();
+    }
+    // The exposure gradient: one add per workgroup instead of one per pixel.
+    red[li] = dexp;
+    workgroupBarrier();
+    for (var off = 128u; off > 0u; off = off / 2u) {
+        if li < off {
+            red[li] += red[li + off];
+        }
+        workgroupBarrier();
+    }
+    if li == 0u {
+        let e0 = stride * view.count;
+        accum_add(e0, red[0].x);
+        accum_add(e0 + 1u, red[0].y);
+    }
+}

@@ -1,0 +1,519 @@
+//! Host glue of the rasteriser kernels: buffers, pipelines and the order of passes.
+//!
+//! Forward, per view: `project` → `scan` (tile counts to offsets, total on the GPU)
+//! → `emit` (key, surfel) pairs → radix sort → `tile_ranges` → `rasterize`.
+//! Backward: `rasterize_backward` (camera-space gradients, accumulated with the
+//! adapter's strategy) → `project_backward` (parameter gradients).
+//!
+//! The pair buffers are sized from the pair count, read back once per view (4 bytes)
+//! after the scan; every other count stays on the GPU.
+
+use super::project::tile_bits;
+use super::rasterize_backward::{OutputGrads, VIEW_GRAD};
+use super::{CullConfig, Image, Params, ViewCamera};
+use crate::gpu::radix_sort::{RadixSorter, SortPairs, SortedIn};
+use crate::gpu::readback::{read_bytes, read_f32};
+use crate::gpu::{AccumStrategy, GpuContext, GpuError};
+use wgpu::util::DeviceExt;
+
+const VIEW_WGSL: &str = include_str!("../../shaders/view.wgsl");
+
+pub struct GpuRasterizer {
+    project: wgpu::ComputePipeline,
+    scan_blocks: wgpu::ComputePipeline,
+    scan_sums: wgpu::ComputePipeline,
+    add_offsets: wgpu::ComputePipeline,
+    emit: wgpu::ComputePipeline,
+    ranges: wgpu::ComputePipeline,
+    raster: wgpu::ComputePipeline,
+    raster_bwd: wgpu::ComputePipeline,
+    project_bwd: wgpu::ComputePipeline,
+    sorter: RadixSorter,
+}
+
+/// Surfel parameters on the GPU (structure of arrays).
+pub struct GpuParams {
+    pub pos: wgpu::Buffer,
+    pub rotation: wgpu::Buffer,
+    pub log_scale: wgpu::Buffer,
+    pub opacity: wgpu::Buffer,
+    pub rgb: wgpu::Buffer,
+    pub logits: wgpu::Buffer,
+    pub count: u32,
+    pub channels: u32,
+}
+
+/// Forward state kept for the backward pass.
+pub struct GpuForward {
+    pub rgb: wgpu::Buffer,
+    pub logits: wgpu::Buffer,
+    pub depth: wgpu::Buffer,
+    pub alpha: wgpu::Buffer,
+    pub t_final: wgpu::Buffer,
+    pub last: wgpu::Buffer,
+    pub colour: wgpu::Buffer,
+    pub proj: wgpu::Buffer,
+    pub order: wgpu::Buffer,
+    pub ranges: wgpu::Buffer,
+    pub view: wgpu::Buffer,
+    pub pairs: u32,
+    pub width: u32,
+    pub height: u32,
+    pub channels: u32,
+}
+
+fn storage(ctx: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
+    ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: bytes.max(16),
+        usage: wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+fn init_storage(ctx: &GpuContext, label: &str, data: &[u8]) -> wgpu::Buffer {
+    let mut bytes = data.to_vec();
+    bytes.resize(bytes.len().max(16), 0);
+    ctx.device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: &bytes,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+        })
+}
+
+fn uniform(ctx: &GpuContext, label: &str, data: &[u8]) -> wgpu::Buffer {
+    ctx.device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: data,
+            usage: wgpu::BufferUsages::UNIFORM,
+        })
+}
+
+/// The `View` uniform of shaders/view.wgsl.
+fn view_bytes(cam: &ViewCamera, cull: &CullConfig, count: u32, channels: u32) -> Vec<u8> {
+    let mut f: Vec<u32> = Vec::with_capacity(28);
+    for row in &cam.world_to_cam {
+        f.extend(row.iter().map(|v| v.to_bits()));
+    }
+    f.extend([cam.fx, cam.fy, cam.cx, cam.cy].map(f32::to_bits));
+    f.extend([cam.width, cam.height, cam.tiles_x(), cam.tiles_y()]);
+    f.extend([cull.near, cull.far, cull.half_width, cam.exposure[0]].map(f32::to_bits));
+    f.extend([cam.exposure[1].to_bits(), tile_bits(cam), channels, count]);
+    bytemuck::cast_slice(&f).to_vec()
+}
+
+fn bind(
+    ctx: &GpuContext,
+    p: &wgpu::ComputePipeline,
+    entries: &[(u32, &wgpu::Buffer)],
+) -> wgpu::BindGroup {
+    let entries: Vec<wgpu::BindGroupEntry> = entries
+        .iter()
+        .map(|(b, buf)| wgpu::BindGroupEntry {
+            binding: *b,
+            resource: buf.as_entire_binding(),
+        })
+        .collect();
+    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: None,
+        layout: &p.get_bind_group_layout(0),
+        entries: &entries,
+    })
+}
+
+fn dispatch(
+    enc: &mut wgpu::CommandEncoder,
+    p: &wgpu::ComputePipeline,
+    bg: &wgpu::BindGroup,
+    groups: (u32, u32, u32),
+) {
+    let mut pass = enc.begin_compute_pass(&Default::default());
+    pass.set_pipeline(p);
+    pass.set_bind_group(0, bg, &[]);
+    pass.dispatch_workgroups(groups.0, groups.1, groups.2);
+}
+
+impl GpuRasterizer {
+    /// Pipelines using the adapter's preferred gradient accumulation.
+    pub async fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
+        Self::with_strategy(ctx, ctx.report.accumulation).await
+    }
+
+    /// Pipelines with an explicit accumulation strategy (tests run both natively).
+    pub async fn with_strategy(
+        ctx: &GpuContext,
+        strategy: AccumStrategy,
+    ) -> Result<Self, GpuError> {
+        let pipe = |label: &str, parts: &[&str], entry: &str| {
+            let module = ctx.shader(label, parts);
+            ctx.device
+                .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(label),
+                    layout: None,
+                    module: &module,
+                    entry_point: Some(entry),
+                    compilation_options: Default::default(),
+                    cache: None,
+                })
+        };
+        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let scan = include_str!("../../shaders/scan.wgsl");
+        let me = Self {
+            project: pipe(
+                "project",
+                &[VIEW_WGSL, include_str!("../../shaders/project.wgsl")],
+                "main",
+            ),
+            scan_blocks: pipe("scan_blocks", &[scan], "scan_blocks"),
+            scan_sums: pipe("scan_sums", &[scan], "scan_sums"),
+            add_offsets: pipe("add_offsets", &[scan], "add_offsets"),
+            emit: pipe(
+                "emit",
+                &[VIEW_WGSL, include_str!("../../shaders/emit.wgsl")],
+                "main",
+            ),
+            ranges: pipe(
+                "tile_ranges",
+                &[VIEW_WGSL, include_str!("../../shaders/tile_ranges.wgsl")],
+                "main",
+            ),
+            raster: pipe(
+                "rasterize",
+                &[VIEW_WGSL, include_str!("../../shaders/rasterize.wgsl")],
+                "main",
+            ),
+            raster_bwd: pipe(
+                "rasterize_backward",
+                &[
+                    strategy.wgsl(),
+                    VIEW_WGSL,
+                    include_str!("../../shaders/rasterize_backward.wgsl"),
+                ],
+                "main",
+            ),
+            project_bwd: pipe(
+                "project_backward",
+                &[
+                    VIEW_WGSL,
+                    include_str!("../../shaders/project_backward.wgsl"),
+                ],
+                "main",
+            ),
+            sorter: RadixSorter::new(ctx).await?,
+        };
+        if let Some(e) = scope.pop().await {
+            return Err(GpuError::Validation(e.to_string()));
+        }
+        Ok(me)
+    }
+
+    pub fn upload(ctx: &GpuContext, p: &Params<f32>) -> GpuParams {
+        let flat = |v: Vec<f32>| bytemuck::cast_slice::<f32, u8>(&v).to_vec();
+        GpuParams {
+            pos: init_storage(ctx, "pos", &flat(p.pos.iter().flatten().copied().collect())),
+            rotation: init_storage(
+                ctx,
+                "rotation",
+                &flat(p.rotation.iter().flatten().copied().collect()),
+            ),
+            log_scale: init_storage(
+                ctx,
+                "log_scale",
+                &flat(p.log_scale.iter().flatten().copied().collect()),
+            ),
+            opacity: init_storage(ctx, "opacity", &flat(p.opacity.clone())),
+            rgb: init_storage(ctx, "rgb", &flat(p.rgb.iter().flatten().copied().collect())),
+            logits: init_storage(ctx, "logits", &flat(p.logits.clone())),
+            count: p.len() as u32,
+            channels: p.channels as u32,
+        }
+    }
+
+    pub async fn forward(
+        &self,
+        ctx: &GpuContext,
+        p: &GpuParams,
+        cam: &ViewCamera,
+        cull: &CullConfig,
+    ) -> Result<GpuForward, GpuError> {
+        let n = p.count;
+        let view = uniform(ctx, "view", &view_bytes(cam, cull, n, p.channels));
+        let (gx, gy) = ctx.dispatch_2d(n.div_ceil(256));
+        let grid = uniform(ctx, "grid", bytemuck::cast_slice(&[gx * 256, 0u32, 0, 0]));
+        let proj = storage(ctx, "proj", 4 * 24 * n as u64);
+        let counts = storage(ctx, "tile_count", 4 * n as u64);
+        let offsets = storage(ctx, "offsets", 4 * n as u64);
+        let blocks = (gx * gy).max(1);
+        let block_sums = storage(ctx, "block_sums", 4 * blocks as u64);
+        let total = storage(ctx, "total", 16);
+        let scan_params = uniform(ctx, "scan", bytemuck::cast_slice(&[n, blocks, gx * 256, 0]));
+        let mut enc = ctx.device.create_command_encoder(&Default::default());
+        let bg = bind(
+            ctx,
+            &self.project,
+            &[
+                (0, &view),
+                (1, &p.pos),
+                (2, &p.rotation),
+                (3, &p.log_scale),
+                (4, &p.opacity),
+                (5, &proj),
+                (6, &counts),
+                (7, &grid),
+            ],
+        );
+        dispatch(&mut enc, &self.project, &bg, (gx, gy, 1));
+        // Auto layouts hold only the bindings an entry point uses.
+        if n > 0 {
+            let bg = bind(
+                ctx,
+                &self.scan_blocks,
+                &[
+                    (0, &counts),
+                    (1, &offsets),
+                    (2, &block_sums),
+                    (4, &scan_params),
+                ],
+            );
+            dispatch(&mut enc, &self.scan_blocks, &bg, (gx, gy, 1));
+        }
+        let bg = bind(
+            ctx,
+            &self.scan_sums,
+            &[(2, &block_sums), (3, &total), (4, &scan_params)],
+        );
+        dispatch(&mut enc, &self.scan_sums, &bg, (1, 1, 1));
+        if n > 0 {
+            let bg = bind(
+                ctx,
+                &self.add_offsets,
+                &[(1, &offsets), (2, &block_sums), (4, &scan_params)],
+            );
+            dispatch(&mut enc, &self.add_offsets, &bg, (gx, gy, 1));
+        }
+        ctx.queue.submit([enc.finish()]);
+        let t = read_bytes(ctx, &total, 4).await?;
+        let pairs = u32::from_le_bytes([t[0], t[1], t[2], t[3]]);
+        let max_pairs = (ctx.limits.max_storage_buffer_binding_size / 4) as u64;
+        if pairs as u64 > max_pairs {
+            return Err(GpuError::Validation(format!(
+                "{pairs} surfel-tile pairs exceed the adapter's storage binding of {max_pairs} u32; render smaller views or fewer surfels"
+            )));
+        }
+        let cap = pairs.max(1);
+        let keys_a = storage(ctx, "keys_a", 4 * cap as u64);
+        let values_a = storage(ctx, "values_a", 4 * cap as u64);
+        let keys_b = storage(ctx, "keys_b", 4 * cap as u64);
+        let values_b = storage(ctx, "values_b", 4 * cap as u64);
+        let tiles = cam.tiles_x() * cam.tiles_y();
+        let ranges = storage(ctx, "ranges", 8 * tiles as u64);
+        let npx = (cam.width * cam.height) as u64;
+        let ch = p.channels as u64;
+        let out = GpuForward {
+            rgb: storage(ctx, "out_rgb", 12 * npx),
+            logits: storage(ctx, "out_logits", 4 * ch * npx),
+            depth: storage(ctx, "out_depth", 4 * npx),
+            alpha: storage(ctx, "out_alpha", 4 * npx),
+            t_final: storage(ctx, "t_final", 4 * npx),
+            last: storage(ctx, "last", 4 * npx),
+            colour: storage(ctx, "colour", 12 * npx),
+            proj,
+            order: values_a.clone(),
+            ranges: ranges.clone(),
+            view,
+            pairs,
+            width: cam.width,
+            height: cam.height,
+            channels: p.channels,
+        };
+        let mut enc = ctx.device.create_command_encoder(&Default::default());
+        let grid_cap = uniform(
+            ctx,
+            "grid_cap",
+            bytemuck::cast_slice(&[gx * 256, cap, 0, 0]),
+        );
+        let bg = bind(
+            ctx,
+            &self.emit,
+            &[
+                (0, &out.view),
+                (1, &out.proj),
+                (2, &counts),
+                (3, &offsets),
+                (4, &keys_a),
+                (5, &values_a),
+                (6, &grid_cap),
+            ],
+        );
+        dispatch(&mut enc, &self.emit, &bg, (gx, gy, 1));
+        let scratch = self.sorter.scratch(ctx, cap);
+        let pairs_in = SortPairs {
+            keys_a: &keys_a,
+            values_a: &values_a,
+            keys_b: &keys_b,
+            values_b: &values_b,
+            count: &total,
+        };
+        let sorted = self
+            .sorter
+            .encode(ctx, &mut enc, &pairs_in, &scratch, cap, 32)?;
+        let (keys, order) = match sorted {
+            SortedIn::A => (&keys_a, &values_a),
+            SortedIn::B => (&keys_b, &values_b),
+        };
+        enc.clear_buffer(&ranges, 0, None);
+        let (px, py) = ctx.dispatch_2d(cap.div_ceil(256));
+        let grid_pairs = uniform(
+            ctx,
+            "grid_pairs",
+            bytemuck::cast_slice(&[px * 256, cap, 0, 0]),
+        );
+        let bg = bind(
+            ctx,
+            &self.ranges,
+            &[
+                (0, &out.view),
+                (1, keys),
+                (2, &total),
+                (3, &ranges),
+                (4, &grid_pairs),
+            ],
+        );
+        dispatch(&mut enc, &self.ranges, &bg, (px, py, 1));
+        let bg = bind(
+            ctx,
+            &self.raster,
+            &[
+                (0, &out.view),
+                (1, &out.proj),
+                (2, order),
+                (3, &ranges),
+                (4, &p.rgb),
+                (5, &p.logits),
+                (6, &out.rgb),
+                (7, &out.logits),
+                (8, &out.depth),
+                (9, &out.alpha),
+                (10, &out.t_final),
+                (11, &out.last),
+                (12, &out.colour),
+            ],
+        );
+        dispatch(
+            &mut enc,
+            &self.raster,
+            &bg,
+            (cam.tiles_x(), cam.tiles_y(), 1),
+        );
+        ctx.queue.submit([enc.finish()]);
+        Ok(GpuForward {
+            order: order.clone(),
+            ..out
+        })
+    }
+
+    pub async fn read_image(ctx: &GpuContext, f: &GpuForward) -> Result<Image<f32>, GpuError> {
+        let npx = (f.width * f.height) as usize;
+        let ch = f.channels as usize;
+        Ok(Image {
+            width: f.width,
+            height: f.height,
+            rgb: read_f32(ctx, &f.rgb, 3 * npx).await?,
+            logits: read_f32(ctx, &f.logits, ch * npx).await?,
+            depth: read_f32(ctx, &f.depth, npx).await?,
+            alpha: read_f32(ctx, &f.alpha, npx).await?,
+            channels: ch,
+        })
+    }
+
+    /// Parameter gradients (same layout as `Params`) and the exposure gradient.
+    pub async fn backward(
+        &self,
+        ctx: &GpuContext,
+        p: &GpuParams,
+        f: &GpuForward,
+        g: &OutputGrads<f32>,
+    ) -> Result<(Params<f32>, [f32; 2]), GpuError> {
+        let n = p.count as usize;
+        let ch = p.channels as usize;
+        let stride = VIEW_GRAD + ch;
+        let npx = (f.width * f.height) as u64;
+        let f32s = |v: &[f32]| bytemuck::cast_slice::<f32, u8>(v).to_vec();
+        let g_rgb = init_storage(ctx, "g_rgb", &f32s(&g.rgb));
+        let g_logits = init_storage(ctx, "g_logits", &f32s(&g.logits));
+        let g_depth = init_storage(ctx, "g_depth", &f32s(&g.depth));
+        let g_alpha = init_storage(ctx, "g_alpha", &f32s(&g.alpha));
+        let scratch = storage(ctx, "scratch", 8 * ch as u64 * npx);
+        let view_grad = storage(ctx, "view_grad", 4 * (stride * n + 2) as u64);
+        let out_stride = 13 + ch;
+        let grads = storage(ctx, "grads", 4 * (out_stride * n) as u64);
+        let mut enc = ctx.device.create_command_encoder(&Default::default());
+        enc.clear_buffer(&view_grad, 0, None);
+        let bg = bind(
+            ctx,
+            &self.raster_bwd,
+            &[
+                (0, &view_grad),
+                (1, &f.view),
+                (2, &f.proj),
+                (3, &f.order),
+                (4, &f.ranges),
+                (5, &p.rgb),
+                (6, &p.logits),
+                (7, &f.t_final),
+                (8, &f.last),
+                (9, &f.colour),
+                (10, &g_rgb),
+                (11, &g_logits),
+                (12, &g_depth),
+                (13, &g_alpha),
+                (14, &scratch),
+            ],
+        );
+        dispatch(
+            &mut enc,
+            &self.raster_bwd,
+            &bg,
+            (f.width.div_ceil(16), f.height.div_ceil(16), 1),
+        );
+        let (gx, gy) = ctx.dispatch_2d((n as u32).div_ceil(256));
+        let grid = uniform(ctx, "grid", bytemuck::cast_slice(&[gx * 256, 0u32, 0, 0]));
+        let bg = bind(
+            ctx,
+            &self.project_bwd,
+            &[
+                (0, &f.view),
+                (1, &view_grad),
+                (2, &p.rotation),
+                (3, &p.log_scale),
+                (4, &grads),
+                (5, &grid),
+            ],
+        );
+        dispatch(&mut enc, &self.project_bwd, &bg, (gx, gy, 1));
+        ctx.queue.submit([enc.finish()]);
+        let flat = read_f32(ctx, &grads, out_stride * n).await?;
+        let tail = read_bytes(ctx, &view_grad, 4 * (stride * n + 2) as u64).await?;
+        let e: Vec<f32> = bytemuck::pod_collect_to_vec(&tail[4 * stride * n..]);
+        let mut out = Params {
+            channels: ch,
+            ..Default::default()
+        };
+        for i in 0..n {
+            let s = &flat[out_stride * i..out_stride * (i + 1)];
+            out.pos.push([s[0], s[1], s[2]]);
+            out.rotation.push([s[3], s[4], s[5], s[6]]);
+            out.log_scale.push([s[7], s[8]]);
+            out.opacity.push(s[9]);
+            out.rgb.push([s[10], s[11], s[12]]);
+            out.logits.extend_from_slice(&s[13..13 + ch]);
+        }
+        Ok((out, [e[0], e[1]]))
+    }
+}

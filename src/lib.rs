@@ -7,6 +7,8 @@
 pub mod bundle;
 pub mod eval;
 pub mod gpu;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod import;
 pub mod synth;
 
 #[cfg(not(target_arch = "wasm32"))]

@@ -3,6 +3,7 @@
 mod eval;
 mod example;
 mod gpu;
+mod import;
 mod inspect;
 pub mod progress;
 mod synth;
@@ -62,6 +63,13 @@ enum Command {
     /// it has none (elevation then against the nearest LiDAR point within 0.1 m in
     /// xy). Prints {"metrics": {...}} as JSON.
     Eval(eval::Args),
+    /// Convert a public dataset (KITTI odometry, nuScenes) into a scene bundle.
+    ///
+    /// Images are streamed into the zip one at a time; the result is validated like
+    /// `rogs inspect` does before it is moved into place (exit code 2 and every
+    /// problem listed when it is invalid). docs/IMPORT.md describes the layouts and
+    /// every transform.
+    Import(import::Args),
 }
 
 pub fn run() -> ExitCode {
@@ -72,6 +80,7 @@ pub fn run() -> ExitCode {
         Command::Example(a) => example::run(a),
         Command::Synth(a) => synth::run(a),
         Command::Eval(a) => eval::run(a),
+        Command::Import(a) => import::run(a),
     };
     match result {
         Ok(code) => code,

@@ -10,6 +10,9 @@ use super::road::{Centreline, RoadSpec, T_MAX};
 
 const BLOCK: usize = 16;
 
+/// One raster row of heights, s and t, filled in parallel.
+type RowSlices<'a> = (&'a mut [f32], (&'a mut [f32], &'a mut [f32]));
+
 pub struct Field {
     /// World xy of vertex (0, 0), metres.
     pub origin: [f64; 2],
@@ -48,7 +51,7 @@ impl Field {
         let nearest = CoarseIndex::build(line, origin, nx as f64 * cell, ny as f64 * cell);
         let n = nx * ny;
         let (mut h, mut s, mut t) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
-        let mut rows: Vec<(&mut [f32], (&mut [f32], &mut [f32]))> = h
+        let mut rows: Vec<RowSlices> = h
             .chunks_mut(nx)
             .zip(s.chunks_mut(nx).zip(t.chunks_mut(nx)))
             .collect();

@@ -8,6 +8,8 @@ pub mod bundle;
 pub mod eval;
 pub mod gpu;
 pub mod grid;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod import;
 pub mod init;
 pub mod render;
 pub mod spatial;

@@ -19,7 +19,7 @@ pub use summary::Summary;
 pub use validate::{check_rigid, decode_label, decode_rgb, image_dims, ROTATION_TOLERANCE};
 #[cfg(not(target_arch = "wasm32"))]
 pub use write::write_dir;
-pub use write::{write_zip, BundleFile};
+pub use write::{write_zip, BundleFile, ZipBundleWriter};
 
 #[cfg(not(target_arch = "wasm32"))]
 pub use source::DirSource;

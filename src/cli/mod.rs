@@ -4,6 +4,7 @@ mod bench;
 mod eval;
 mod example;
 mod gpu;
+mod import;
 mod inspect;
 pub mod progress;
 mod synth;
@@ -66,6 +67,13 @@ enum Command {
     /// Benchmarks: measured speed and memory, median of several runs.
     #[command(subcommand)]
     Bench(bench::Bench),
+    /// Convert a public dataset (KITTI odometry, nuScenes) into a scene bundle.
+    ///
+    /// Images are streamed into the zip one at a time; the result is validated like
+    /// `rogs inspect` does before it is moved into place (exit code 2 and every
+    /// problem listed when it is invalid). docs/IMPORT.md describes the layouts and
+    /// every transform.
+    Import(import::Args),
 }
 
 pub fn run() -> ExitCode {
@@ -77,6 +85,7 @@ pub fn run() -> ExitCode {
         Command::Synth(a) => synth::run(a),
         Command::Eval(a) => eval::run(a),
         Command::Bench(b) => bench::run(b),
+        Command::Import(a) => import::run(a),
     };
     match result {
         Ok(code) => code,

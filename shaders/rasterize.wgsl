@@ -13,13 +13,11 @@
 @group(0) @binding(3) var<storage, read> ranges: array<u32>;
 @group(0) @binding(4) var<storage, read> rgb: array<f32>;
 @group(0) @binding(5) var<storage, read> logits: array<f32>;
-@group(0) @binding(6) var<storage, read_write> out_rgb: array<f32>;
+// Per pixel, PIX_STRIDE floats (browsers allow 10 storage buffers per stage, so the
+// per-pixel outputs share one): rgb 3, depth, alpha, final transmittance, last
+// contributor (u32 bits), colour before exposure 3.
+@group(0) @binding(6) var<storage, read_write> px_out: array<f32>;
 @group(0) @binding(7) var<storage, read_write> out_logits: array<f32>;
-@group(0) @binding(8) var<storage, read_write> out_depth: array<f32>;
-@group(0) @binding(9) var<storage, read_write> out_alpha: array<f32>;
-@group(0) @binding(10) var<storage, read_write> t_final: array<f32>;
-@group(0) @binding(11) var<storage, read_write> last: array<u32>;
-@group(0) @binding(12) var<storage, read_write> colour: array<f32>;
 
 var<workgroup> batch: array<Surfel, 256>;
 var<workgroup> batch_id: array<u32, 256>;
@@ -103,12 +101,13 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
         return;
     }
     let gain = exp(view.exposure_a);
+    let o = PIX_STRIDE * pix;
     for (var j = 0u; j < 3u; j++) {
-        colour[3u * pix + j] = c[j];
-        out_rgb[3u * pix + j] = gain * c[j] + view.exposure_b;
+        px_out[o + j] = gain * c[j] + view.exposure_b;
+        px_out[o + 7u + j] = c[j];
     }
-    out_depth[pix] = depth;
-    out_alpha[pix] = 1.0 - t;
-    t_final[pix] = t;
-    last[pix] = last_k;
+    px_out[o + 3u] = depth;
+    px_out[o + 4u] = 1.0 - t;
+    px_out[o + 5u] = t;
+    px_out[o + 6u] = bitcast<f32>(last_k);
 }

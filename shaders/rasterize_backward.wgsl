@@ -15,14 +15,12 @@
 @group(0) @binding(4) var<storage, read> ranges: array<u32>;
 @group(0) @binding(5) var<storage, read> rgb: array<f32>;
 @group(0) @binding(6) var<storage, read> logits: array<f32>;
-@group(0) @binding(7) var<storage, read> t_final: array<f32>;
-@group(0) @binding(8) var<storage, read> last: array<u32>;
-@group(0) @binding(9) var<storage, read> colour: array<f32>;
-@group(0) @binding(10) var<storage, read> g_rgb: array<f32>;
-@group(0) @binding(11) var<storage, read> g_logits: array<f32>;
-@group(0) @binding(12) var<storage, read> g_depth: array<f32>;
-@group(0) @binding(13) var<storage, read> g_alpha: array<f32>;
-@group(0) @binding(14) var<storage, read_write> scratch: array<f32>;
+// Forward outputs (PIX_STRIDE per pixel) and loss gradients (GRAD_STRIDE per pixel:
+// rgb 3, depth, alpha), packed to stay within 10 storage buffers per stage.
+@group(0) @binding(7) var<storage, read> px_out: array<f32>;
+@group(0) @binding(8) var<storage, read> g_px: array<f32>;
+@group(0) @binding(9) var<storage, read> g_logits: array<f32>;
+@group(0) @binding(10) var<storage, read_write> scratch: array<f32>;
 
 const S_PC: u32 = 0u;
 const S_TU: u32 = 3u;
@@ -82,14 +80,16 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
     var da_out = 0.0;
     var my_last = 0u;
     if inside {
-        let go = vec3<f32>(g_rgb[3u * pix], g_rgb[3u * pix + 1u], g_rgb[3u * pix + 2u]);
+        let gp = GRAD_STRIDE * pix;
+        let po = PIX_STRIDE * pix;
+        let go = vec3<f32>(g_px[gp], g_px[gp + 1u], g_px[gp + 2u]);
         dc = gain * go;
-        let col = vec3<f32>(colour[3u * pix], colour[3u * pix + 1u], colour[3u * pix + 2u]);
+        let col = vec3<f32>(px_out[po + 7u], px_out[po + 8u], px_out[po + 9u]);
         dexp = vec2<f32>(dot(go * gain, col), go.x + go.y + go.z);
-        dd = g_depth[pix];
-        t_fin = t_final[pix];
-        da_out = g_alpha[pix];
-        my_last = last[pix];
+        dd = g_px[gp + 3u];
+        da_out = g_px[gp + 4u];
+        t_fin = px_out[po + 5u];
+        my_last = bitcast<u32>(px_out[po + 6u]);
         for (var j = 0u; j < 2u * ch; j++) {
             scratch[pix * 2u * ch + j] = 0.0;
         }

@@ -24,6 +24,10 @@ struct View {
 }
 
 const PROJ_STRIDE: u32 = 24u;
+/// Per-pixel forward outputs: rgb 3, depth, alpha, t_final, last, colour 3.
+const PIX_STRIDE: u32 = 10u;
+/// Per-pixel loss gradients: rgb 3, depth, alpha.
+const GRAD_STRIDE: u32 = 5u;
 const TILE: u32 = 16u;
 const MIN_ALPHA: f32 = 0.003921569;
 const MAX_ALPHA: f32 = 0.99;

@@ -52,3 +52,23 @@ fn bundle_round_trip_and_named_error_in_wasm() {
         matches!(&e.0[..], [Problem::MissingFile { field, .. }] if field == "frames[1].views[0].image")
     );
 }
+
+#[wasm_bindgen_test]
+async fn rasteriser_matches_the_cpu_oracle_in_the_browser() {
+    let ctx = match GpuContext::new().await {
+        Ok(c) => c,
+        Err(e) => panic!("WebGPU adapter required: {e}"),
+    };
+    let d = rogs::render::check::compare(&ctx, AccumStrategy::CasU32)
+        .await
+        .expect("gpu");
+    assert_eq!(
+        d.pairs.0 as usize, d.pairs.1,
+        "surfel-tile pair counts differ"
+    );
+    assert!(d.pairs.1 > 2000);
+    assert!(d.forward < 1e-4, "forward max abs error {}", d.forward);
+    for (name, rel) in &d.grads {
+        assert!(*rel < 2e-3, "{name}: GPU vs CPU gradient differs by {rel}");
+    }
+}

@@ -8,6 +8,26 @@ use std::time::Instant;
 
 #[derive(clap::Subcommand)]
 pub enum Bench {
+    /// The rasteriser on one view of a bundle (its culled surfel set after grid and
+    /// initialisation): pixel×surfel pairs per second forward and forward+backward,
+    /// median of the runs, wall time around each GPU submission.
+    Raster {
+        /// The scene bundle.
+        bundle: PathBuf,
+        /// Frame and view (camera index within the frame) to render.
+        #[arg(long, default_value_t = 0)]
+        frame: usize,
+        #[arg(long, default_value_t = 0)]
+        view: usize,
+        #[arg(long, default_value_t = 7)]
+        runs: usize,
+        /// Base grid resolution, metres.
+        #[arg(long, default_value_t = 0.05)]
+        resolution: f64,
+        /// Skip adaptive refinement (faster set-up).
+        #[arg(long)]
+        no_adaptive: bool,
+    },
     /// Grid, initialisation and refinement of a bundle: time per stage, surfel
     /// counts and bytes per surfel (median of the runs).
     Init {
@@ -32,6 +52,14 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 pub fn run(b: Bench) -> Result<ExitCode, String> {
     match b {
+        Bench::Raster {
+            bundle,
+            frame,
+            view,
+            runs,
+            resolution,
+            no_adaptive,
+        } => raster(&bundle, frame, view, runs, resolution, no_adaptive),
         Bench::Init {
             bundle,
             runs,
@@ -78,4 +106,95 @@ pub fn run(b: Bench) -> Result<ExitCode, String> {
             Ok(ExitCode::SUCCESS)
         }
     }
+}
+
+fn raster(
+    bundle: &std::path::Path,
+    frame: usize,
+    view: usize,
+    runs: usize,
+    resolution: f64,
+    no_adaptive: bool,
+) -> Result<ExitCode, String> {
+    use crate::gpu::GpuContext;
+    use crate::render::from_bundle::{local_origin, params, view_camera};
+    use crate::render::gpu::GpuRasterizer;
+    use crate::render::rasterize_backward::OutputGrads;
+    use crate::render::CullConfig;
+    let b = Bundle::open(bundle, Limits::default(), &mut |_, _| {}).map_err(|e| e.to_string())?;
+    let mut cfg = PrepareConfig::default();
+    cfg.grid.resolution = resolution;
+    cfg.refine.enabled = !no_adaptive;
+    let p = prepare(&b, &cfg).map_err(|e| e.to_string())?;
+    let origin = local_origin(&p.grid, &p.surfels);
+    let cam =
+        view_camera(&b.manifest, frame, view, origin, [0.0, 0.0]).ok_or("no such frame or view")?;
+    let cull = CullConfig::default();
+    // Only the surfels in the view's culling box go to the GPU, as in training.
+    let all = params(&p.grid, &p.surfels, origin);
+    let keep: Vec<usize> = (0..all.len())
+        .filter(|&i| crate::render::project::project(&all, i, &cam, &cull).is_some())
+        .collect();
+    let ch = all.channels;
+    let sub = crate::render::Params {
+        pos: keep.iter().map(|&i| all.pos[i]).collect(),
+        rgb: keep.iter().map(|&i| all.rgb[i]).collect(),
+        log_scale: keep.iter().map(|&i| all.log_scale[i]).collect(),
+        opacity: keep.iter().map(|&i| all.opacity[i]).collect(),
+        rotation: keep.iter().map(|&i| all.rotation[i]).collect(),
+        logits: keep
+            .iter()
+            .flat_map(|&i| all.logits[i * ch..(i + 1) * ch].to_vec())
+            .collect(),
+        channels: ch,
+    };
+    let ctx = GpuContext::new_blocking().map_err(|e| e.to_string())?;
+    let r = pollster::block_on(GpuRasterizer::new(&ctx)).map_err(|e| e.to_string())?;
+    let gp = GpuRasterizer::upload(&ctx, &sub);
+    let npx = (cam.width * cam.height) as usize;
+    let grads = OutputGrads {
+        rgb: vec![1e-3; 3 * npx],
+        logits: vec![1e-3; ch * npx],
+        depth: vec![0.0; npx],
+        alpha: vec![0.0; npx],
+    };
+    let (mut fwd, mut both) = (Vec::new(), Vec::new());
+    let mut pairs = 0;
+    let mut evaluations = 0u64;
+    for _ in 0..runs.max(1) {
+        let t = Instant::now();
+        let f = pollster::block_on(r.forward(&ctx, &gp, &cam, &cull)).map_err(|e| e.to_string())?;
+        let _ = pollster::block_on(crate::gpu::readback::read_bytes(&ctx, &f.px, 4))
+            .map_err(|e| e.to_string())?;
+        fwd.push(t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        let f = pollster::block_on(r.forward(&ctx, &gp, &cam, &cull)).map_err(|e| e.to_string())?;
+        pollster::block_on(r.backward(&ctx, &gp, &f, &grads)).map_err(|e| e.to_string())?;
+        both.push(t.elapsed().as_secs_f64());
+        pairs = f.pairs;
+        // Pixel×surfel pairs: every pair of a tile against the tile's 256 pixels
+        // (an upper bound on evaluations: early termination skips some).
+        evaluations = pairs as u64 * 256;
+    }
+    let (tf, tb) = (median(fwd), median(both));
+    let out = serde_json::json!({
+        "bench": "raster",
+        "adapter": ctx.report.name,
+        "accumulation": ctx.report.accumulation,
+        "view": {"width": cam.width, "height": cam.height, "frame": frame, "view": view},
+        "surfels_total": all.len(),
+        "surfels_in_view": sub.len(),
+        "surfel_tile_pairs": pairs,
+        "pixel_surfel_pairs": evaluations,
+        "forward_s": tf,
+        "forward_backward_s": tb,
+        "forward_pairs_per_s": evaluations as f64 / tf,
+        "forward_backward_pairs_per_s": evaluations as f64 / tb,
+        "runs": runs,
+    });
+    println!(
+        "{}",
+        serde_json::to_string_pretty(&out).map_err(|e| e.to_string())?
+    );
+    Ok(ExitCode::SUCCESS)
 }

@@ -17,6 +17,8 @@ use crate::gpu::{AccumStrategy, GpuContext, GpuError};
 use wgpu::util::DeviceExt;
 
 const VIEW_WGSL: &str = include_str!("../../shaders/view.wgsl");
+/// Floats per pixel of the packed forward outputs (`PIX_STRIDE` in view.wgsl).
+const PIX_STRIDE: usize = 10;
 
 pub struct GpuRasterizer {
     project: wgpu::ComputePipeline,
@@ -45,13 +47,10 @@ pub struct GpuParams {
 
 /// Forward state kept for the backward pass.
 pub struct GpuForward {
-    pub rgb: wgpu::Buffer,
+    /// Per pixel `PIX_STRIDE` floats: rgb 3, depth, alpha, final transmittance, last
+    /// contributor (u32 bits), colour before exposure 3.
+    pub px: wgpu::Buffer,
     pub logits: wgpu::Buffer,
-    pub depth: wgpu::Buffer,
-    pub alpha: wgpu::Buffer,
-    pub t_final: wgpu::Buffer,
-    pub last: wgpu::Buffer,
-    pub colour: wgpu::Buffer,
     pub proj: wgpu::Buffer,
     pub order: wgpu::Buffer,
     pub ranges: wgpu::Buffer,
@@ -300,7 +299,7 @@ impl GpuRasterizer {
         ctx.queue.submit([enc.finish()]);
         let t = read_bytes(ctx, &total, 4).await?;
         let pairs = u32::from_le_bytes([t[0], t[1], t[2], t[3]]);
-        let max_pairs = (ctx.limits.max_storage_buffer_binding_size / 4) as u64;
+        let max_pairs = ctx.limits.max_storage_buffer_binding_size / 4;
         if pairs as u64 > max_pairs {
             return Err(GpuError::Validation(format!(
                 "{pairs} surfel-tile pairs exceed the adapter's storage binding of {max_pairs} u32; render smaller views or fewer surfels"
@@ -316,13 +315,8 @@ impl GpuRasterizer {
         let npx = (cam.width * cam.height) as u64;
         let ch = p.channels as u64;
         let out = GpuForward {
-            rgb: storage(ctx, "out_rgb", 12 * npx),
+            px: storage(ctx, "px_out", 4 * PIX_STRIDE as u64 * npx),
             logits: storage(ctx, "out_logits", 4 * ch * npx),
-            depth: storage(ctx, "out_depth", 4 * npx),
-            alpha: storage(ctx, "out_alpha", 4 * npx),
-            t_final: storage(ctx, "t_final", 4 * npx),
-            last: storage(ctx, "last", 4 * npx),
-            colour: storage(ctx, "colour", 12 * npx),
             proj,
             order: values_a.clone(),
             ranges: ranges.clone(),
@@ -396,13 +390,8 @@ impl GpuRasterizer {
                 (3, &ranges),
                 (4, &p.rgb),
                 (5, &p.logits),
-                (6, &out.rgb),
+                (6, &out.px),
                 (7, &out.logits),
-                (8, &out.depth),
-                (9, &out.alpha),
-                (10, &out.t_final),
-                (11, &out.last),
-                (12, &out.colour),
             ],
         );
         dispatch(
@@ -421,13 +410,18 @@ impl GpuRasterizer {
     pub async fn read_image(ctx: &GpuContext, f: &GpuForward) -> Result<Image<f32>, GpuError> {
         let npx = (f.width * f.height) as usize;
         let ch = f.channels as usize;
+        let px = read_f32(ctx, &f.px, PIX_STRIDE * npx).await?;
+        let field = |k: usize| px.chunks_exact(PIX_STRIDE).map(move |p| p[k]);
         Ok(Image {
             width: f.width,
             height: f.height,
-            rgb: read_f32(ctx, &f.rgb, 3 * npx).await?,
+            rgb: px
+                .chunks_exact(PIX_STRIDE)
+                .flat_map(|p| [p[0], p[1], p[2]])
+                .collect(),
             logits: read_f32(ctx, &f.logits, ch * npx).await?,
-            depth: read_f32(ctx, &f.depth, npx).await?,
-            alpha: read_f32(ctx, &f.alpha, npx).await?,
+            depth: field(3).collect(),
+            alpha: field(4).collect(),
             channels: ch,
         })
     }
@@ -445,10 +439,19 @@ impl GpuRasterizer {
         let stride = VIEW_GRAD + ch;
         let npx = (f.width * f.height) as u64;
         let f32s = |v: &[f32]| bytemuck::cast_slice::<f32, u8>(v).to_vec();
-        let g_rgb = init_storage(ctx, "g_rgb", &f32s(&g.rgb));
+        let packed: Vec<f32> = (0..npx as usize)
+            .flat_map(|i| {
+                [
+                    g.rgb[3 * i],
+                    g.rgb[3 * i + 1],
+                    g.rgb[3 * i + 2],
+                    g.depth[i],
+                    g.alpha[i],
+                ]
+            })
+            .collect();
+        let g_px = init_storage(ctx, "g_px", &f32s(&packed));
         let g_logits = init_storage(ctx, "g_logits", &f32s(&g.logits));
-        let g_depth = init_storage(ctx, "g_depth", &f32s(&g.depth));
-        let g_alpha = init_storage(ctx, "g_alpha", &f32s(&g.alpha));
         let scratch = storage(ctx, "scratch", 8 * ch as u64 * npx);
         let view_grad = storage(ctx, "view_grad", 4 * (stride * n + 2) as u64);
         let out_stride = 13 + ch;
@@ -466,14 +469,10 @@ impl GpuRasterizer {
                 (4, &f.ranges),
                 (5, &p.rgb),
                 (6, &p.logits),
-                (7, &f.t_final),
-                (8, &f.last),
-                (9, &f.colour),
-                (10, &g_rgb),
-                (11, &g_logits),
-                (12, &g_depth),
-                (13, &g_alpha),
-                (14, &scratch),
+                (7, &f.px),
+                (8, &g_px),
+                (9, &g_logits),
+                (10, &scratch),
             ],
         );
         dispatch(

@@ -11,6 +11,7 @@
 //! `project_backward.rs`. The oracle is written to be read, not to be fast.
 
 pub mod check;
+pub mod from_bundle;
 pub mod gpu;
 pub mod project;
 pub mod project_backward;

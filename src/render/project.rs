@@ -128,13 +128,12 @@ pub fn sort_key(cam: &ViewCamera, cull: &CullConfig, tile: u32, depth: f32) -> u
     (tile << bits) | q.min(((1u64 << bits) - 1) as u32)
 }
 
+/// The projected surfels and the (sort key, surfel) pairs of a view.
+pub type TileLists<R> = (Vec<Option<Projected<R>>>, Vec<(u32, u32)>);
+
 /// Every (key, surfel) pair of the view, in the order the GPU sorts them to: by key,
 /// ties by surfel index (the sort is stable and pairs are emitted in surfel order).
-pub fn tile_lists<R: Real>(
-    p: &Params<R>,
-    cam: &ViewCamera,
-    cull: &CullConfig,
-) -> (Vec<Option<Projected<R>>>, Vec<(u32, u32)>) {
+pub fn tile_lists<R: Real>(p: &Params<R>, cam: &ViewCamera, cull: &CullConfig) -> TileLists<R> {
     let projected: Vec<Option<Projected<R>>> =
         (0..p.len()).map(|i| project(p, i, cam, cull)).collect();
     let mut pairs = Vec::new();

@@ -1,5 +1,6 @@
 //! Writes the bundles the page tests drop on the page: `valid.zip` (the tiny example)
-//! and `invalid.zip` (a missing image, a broken pose and an unknown label value).
+//! `invalid.zip` (a missing image, a broken pose and an unknown label value) and
+//! `demo.zip` (a tiny synthetic scene standing in for the demo).
 //! Usage: `cargo run --example page_fixtures -- OUT_DIR`.
 
 use rogs::bundle::example::{self, png_gray};
@@ -27,6 +28,17 @@ fn main() -> Result<(), String> {
         f.1 = png_gray(&lab);
     }
     std::fs::write(out.join("invalid.zip"), write_zip(&m, &files)?).map_err(|e| e.to_string())?;
-    eprintln!("wrote {}/valid.zip and invalid.zip", out.display());
+    // Stands in for the demo scene `npm start` generates (the tiny preset, for speed).
+    let cfg = rogs::synth::SynthConfig::preset(rogs::synth::Preset::Tiny, 1);
+    let demo = rogs::synth::generate(&cfg, &|_, _, _| {})?;
+    std::fs::write(
+        out.join("demo.zip"),
+        write_zip(&demo.manifest, &demo.files)?,
+    )
+    .map_err(|e| e.to_string())?;
+    eprintln!(
+        "wrote {}/valid.zip, invalid.zip and demo.zip",
+        out.display()
+    );
     Ok(())
 }

@@ -5,4 +5,10 @@ cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 . scripts/env.sh
 wasm-pack build --release --target web --out-dir www/pkg --mode no-install --no-typescript --no-pack
+# The embedded demo scene: a synthetic road with exact truth, generated once.
+if [ ! -f www/demo/demo.zip ]; then
+  cargo build --release --bin rogs
+  mkdir -p www/demo
+  ./target/release/rogs synth --preset demo --seed 1 --lidar --pose-noise-m 0.05 --pose-noise-deg 0.5 --out www/demo/demo.zip
+fi
 exec node scripts/serve.mjs --port "${PORT:-8080}"

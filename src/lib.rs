@@ -11,6 +11,7 @@ pub mod grid;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod import;
 pub mod init;
+pub mod par;
 pub mod render;
 pub mod spatial;
 pub mod synth;

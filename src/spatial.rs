@@ -84,16 +84,22 @@ impl<'a> PointGrid<'a> {
                 let p = self.pts[i];
                 found.push(((p[0] - x).hypot(p[1] - y), i));
             });
-            found.sort_by(|a, b| a.0.total_cmp(&b.0));
             // Every point outside the searched rings is at least r·cell away.
-            if found.len() >= k && found[k - 1].0 <= r as f64 * self.cell {
-                break;
+            if found.len() >= k && k > 0 {
+                let kth = found
+                    .select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0))
+                    .1
+                     .0;
+                if kth <= r as f64 * self.cell {
+                    break;
+                }
             }
             if found.len() == self.pts.len() {
                 break;
             }
             r += 1;
         }
+        found.sort_by(|a, b| a.0.total_cmp(&b.0));
         found.truncate(k);
         found
     }

@@ -138,7 +138,10 @@ async function openUrl(url) {
   setStatus(`Downloading ${url}…`);
   try {
     const res = await fetch(url);
-    if (!res.ok) throw new Error(`the server answered ${res.status} ${res.statusText}`);
+    if (!res.ok) {
+      const hint = url === 'demo/demo.zip' ? ' (npm start generates the demo scene)' : '';
+      throw new Error(`the server answered ${res.status} ${res.statusText}${hint}`);
+    }
     await openBytes(new Uint8Array(await res.arrayBuffer()), url);
   } catch (e) {
     setStatus(`Could not download ${url}: ${e.message || e}. Check the address, or drop the file instead.`, 'error');
@@ -147,6 +150,7 @@ async function openUrl(url) {
 
 function wireInputs() {
   $('picker').addEventListener('change', (e) => openFile(e.target.files[0]));
+  $('demo').addEventListener('click', () => openUrl('demo/demo.zip'));
   $('example').addEventListener('click', async () => {
     await engineReady;
     try {

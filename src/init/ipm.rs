@@ -61,6 +61,10 @@ fn rigid_inverse(a: &Mat4Rows) -> Mat4Rows {
     m
 }
 
+/// Frames searched for a view of a point: forward cameras see the road from a few
+/// metres ahead, so the nearest frames alone often do not see it.
+pub const CANDIDATE_FRAMES: usize = 16;
+
 /// Nearer than this a point is behind the lens or distorted beyond use.
 const MIN_DEPTH: f64 = 0.5;
 /// Farther than this a road point is a few pixels wide at best.
@@ -218,13 +222,11 @@ pub fn mosaic(b: &Bundle, grid: &Grid, z: &[f32], poses: &PoseIndex) -> Result<B
     ];
     let mut out = BevRaster::empty(origin, res, w, h);
     let base: Vec<usize> = (0..grid.len()).filter(|&k| grid.level[k] == 0).collect();
-    let candidates: Vec<Vec<Projection>> = base
-        .iter()
-        .map(|&k| {
-            let [x, y] = grid.xy(k);
-            cams.candidates(poses, [x, y, z[k] as f64], 4, 3)
-        })
-        .collect();
+    let candidates: Vec<Vec<Projection>> = crate::par::par_map(base.len(), |i| {
+        let k = base[i];
+        let [x, y] = grid.xy(k);
+        cams.candidates(poses, [x, y, z[k] as f64], CANDIDATE_FRAMES, 3)
+    });
     sample_best(b, &cams, &candidates, |i, imgs, p| {
         let k = base[i];
         let [ci, cj] = grid.coords[k];

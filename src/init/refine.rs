@@ -10,16 +10,12 @@
 //! marking edge (G and S) or a curb (Z and S) does. Cells above tau_a split 2×2: new surfels at the cell centre and edge midpoints, shared edge
 //! vertices created once (the index map deduplicates).
 
-use super::ipm::{sample_best, Cams, Projection};
+use super::ipm::{sample_best, Cams, Projection, CANDIDATE_FRAMES};
 use super::PoseIndex;
 use crate::bundle::{Bundle, ClassRole, Problem};
 use crate::grid::Grid;
 use crate::spatial::PointGrid;
 use serde::Serialize;
-
-/// Frames searched for a view of a cell: forward cameras see the road from a few
-/// metres ahead, so the nearest frames alone often do not see it.
-const CANDIDATE_FRAMES: usize = 16;
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct RefineConfig {
@@ -60,6 +56,9 @@ pub struct RefineReport {
     pub mean_z: f64,
     /// Height spread treated as noise (median over cells with LiDAR), metres.
     pub z_noise_floor: f64,
+    /// Time finding each cell's best views, and decoding and sampling the images.
+    pub candidates_ms: f64,
+    pub sampling_ms: f64,
 }
 
 /// Scores every base cell and splits those above the threshold. `z` holds the
@@ -97,11 +96,11 @@ pub fn refine(
             [x, y, zc]
         })
         .collect();
+    let t0 = web_time::Instant::now();
     let cams = Cams::new(&b.manifest);
-    let candidates: Vec<Vec<Projection>> = centres
-        .iter()
-        .map(|&p| cams.candidates(poses, p, CANDIDATE_FRAMES, 2))
-        .collect();
+    let candidates: Vec<Vec<Projection>> = crate::par::par_map(centres.len(), |i| {
+        cams.candidates(poses, centres[i], CANDIDATE_FRAMES, 2)
+    });
     let road: Vec<bool> = (0..=255u8)
         .map(|id| {
             b.manifest
@@ -110,6 +109,7 @@ pub fn refine(
                 .any(|c| c.id == id && c.role == ClassRole::Road)
         })
         .collect();
+    let t_cand = t0.elapsed().as_secs_f64();
     let mut g = vec![0.0f64; cells.len()];
     let mut s = vec![0.0f64; cells.len()];
     report.scored_cells = sample_best(b, &cams, &candidates, |i, imgs, p| {
@@ -146,10 +146,12 @@ pub fn refine(
         g[i] = (gmax / cfg.gradient_full).min(1.0);
         s[i] = if boundary { 1.0 } else { 0.0 };
     })?;
-    let spread: Vec<f64> = cells
-        .iter()
-        .enumerate()
-        .map(|(i, &c)| match lidar {
+    let t_sample = t0.elapsed().as_secs_f64();
+    report.candidates_ms = t_cand * 1e3;
+    report.sampling_ms = (t_sample - t_cand) * 1e3;
+    let spread: Vec<f64> = crate::par::par_map(cells.len(), |i| {
+        let c = cells[i];
+        match lidar {
             Some((pts, sweep)) => {
                 // (sweep, lowest, highest) of the points near the cell centre.
                 let mut per: Vec<(u32, f64, f64)> = Vec::new();
@@ -164,8 +166,8 @@ pub fn refine(
             }
             None => (corner_z(c, 0, 0) + corner_z(c, 2, 2) - corner_z(c, 2, 0) - corner_z(c, 0, 2))
                 .abs(),
-        })
-        .collect();
+        }
+    });
     // Pose noise spreads the accumulated LiDAR of flat road too: only the spread above
     // the typical (median) one is structure.
     let floor = if lidar.is_some() {

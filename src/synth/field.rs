@@ -5,8 +5,8 @@
 //! Ray marching skips 16×16-cell blocks by their maximum height (a one-level max
 //! mip), so most of a ray's length costs one lookup per block.
 
-use super::par::par_chunks;
 use super::road::{Centreline, RoadSpec, T_MAX};
+use crate::par::par_chunks;
 
 const BLOCK: usize = 16;
 

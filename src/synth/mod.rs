@@ -8,7 +8,7 @@
 
 pub mod classes;
 pub mod field;
-mod par;
+
 pub mod raycast;
 pub mod rig;
 pub mod rng;
@@ -270,7 +270,7 @@ pub fn generate(cfg: &SynthConfig, progress: Progress) -> Result<SynthOutput, St
 
     let views = cfg.frames * cfg.cameras;
     let done = std::sync::atomic::AtomicUsize::new(0);
-    let images: Vec<(Vec<u8>, Vec<u8>)> = par::par_map(views, |i| {
+    let images: Vec<(Vec<u8>, Vec<u8>)> = crate::par::par_map(views, |i| {
         let (k, c) = (i / cfg.cameras, i % cfg.cameras);
         let cam = &cameras[c];
         let view = raycast::View {
@@ -293,7 +293,7 @@ pub fn generate(cfg: &SynthConfig, progress: Progress) -> Result<SynthOutput, St
         [0.0, 0.0, 1.8],
     );
     let sweeps: Vec<Vec<u8>> = if cfg.lidar {
-        par::par_map(cfg.frames, |k| {
+        crate::par::par_map(cfg.frames, |k| {
             let pts = lidar_sweep(&world, &mul(&true_poses[k], &lidar_to_vehicle), 32, 0.6);
             pts.iter()
                 .flat_map(|p| p.iter().flat_map(|v| v.to_le_bytes()))

@@ -2,11 +2,11 @@
 //! true trajectory: shaded albedo as seen by a unit-exposure camera (2×2 samples per
 //! pixel, like the images), majority class, elevation at the pixel centre, validity.
 
-use super::par::par_map;
 use super::raycast::{shade, to_u8};
 use super::rig::LANE_T;
 use super::world::World;
 use crate::bundle::Mat4Rows;
+use crate::par::par_map;
 use image::{GrayImage, Luma, Rgb, RgbImage};
 
 pub struct Truth {

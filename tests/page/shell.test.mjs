@@ -21,7 +21,7 @@ let server, browser, base;
 
 before(async () => {
   fs.mkdirSync(shots, { recursive: true });
-  server = createServer([['/fixtures/', fixtures], ['/', path.join(root, 'www')]]);
+  server = createServer([['/fixtures/', fixtures], ['/demo/', fixtures], ['/', path.join(root, 'www')]]);
   await new Promise((r) => server.listen(0, '127.0.0.1', r));
   base = `http://127.0.0.1:${server.address().port}`;
   browser = await chromium.launch({ executablePath: '/usr/bin/chromium', args: FLAGS });
@@ -114,5 +114,15 @@ test('the example button opens the built-in example', async () => {
   await page.click('#example');
   await page.waitForSelector('#summary:not([hidden])');
   assert.equal(await page.textContent('#summary-title'), 'tiny example');
+  await page.close();
+});
+
+test('the demo button opens the demo scene', async () => {
+  const { page, errors } = await openPage();
+  await page.click('#demo');
+  await page.waitForSelector('#summary:not([hidden])');
+  assert.match(await page.textContent('#summary-title'), /synthetic/);
+  assert.match(await page.textContent('#classes'), /crosswalk/);
+  assert.deepEqual(errors, []);
   await page.close();
 });

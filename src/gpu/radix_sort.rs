@@ -13,10 +13,10 @@ use wgpu::util::DeviceExt;
 
 /// Key bits consumed per pass (256 digits).
 pub const BITS_PER_PASS: u32 = 8;
-/// Keys per workgroup in the count and scatter kernels (256 threads x 16).
-const BLOCK: u32 = 4096;
+/// Keys per workgroup in the count and scatter kernels (16 threads x 512).
+const BLOCK: u32 = 8192;
 /// Histogram entries per workgroup in the scan kernels.
-const SCAN_BLOCK: u32 = 4096;
+const SCAN_BLOCK: u32 = 2048;
 const RADIX: u32 = 1 << BITS_PER_PASS;
 const MAX_PASSES: u32 = 32 / BITS_PER_PASS;
 
@@ -237,7 +237,7 @@ impl RadixSorter {
             ));
         }
         let bytes = 4 * max_count as u64;
-        if bytes > ctx.limits.max_storage_buffer_binding_size as u64 {
+        if bytes > ctx.limits.max_storage_buffer_binding_size {
             return invalid(format!(
                 "{max_count} pairs exceed the adapter's storage binding limit"
             ));
@@ -302,7 +302,11 @@ impl RadixSorter {
         for pass in 0..passes {
             let bits = (key_bits - pass * BITS_PER_PASS).min(BITS_PER_PASS);
             let offset = param_slot(pass, bits) * self.param_stride;
-            let group = if pass % 2 == 0 { &a_to_b } else { &b_to_a };
+            let group = if pass.is_multiple_of(2) {
+                &a_to_b
+            } else {
+                &b_to_a
+            };
             cpass.set_bind_group(0, group, &[offset]);
             // Each dispatch sees the previous one's writes (WebGPU orders dispatches).
             cpass.set_pipeline(&self.count);
@@ -316,7 +320,7 @@ impl RadixSorter {
             cpass.set_pipeline(&self.scatter);
             cpass.dispatch_workgroups(bx, by, 1);
         }
-        Ok(if passes % 2 == 0 {
+        Ok(if passes.is_multiple_of(2) {
             SortedIn::A
         } else {
             SortedIn::B

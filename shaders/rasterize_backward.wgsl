@@ -37,20 +37,6 @@ var<workgroup> batch_id: array<u32, 256>;
 var<workgroup> range: vec2<u32>;
 var<workgroup> red: array<vec2<f32>, 256>;
 
-fn load_surfel(i: u32) -> Surfel {
-    let o = PROJ_STRIDE * i;
-    var s: Surfel;
-    s.pc = vec3<f32>(proj[o], proj[o + 1u], proj[o + 2u]);
-    s.su = proj[o + 3u];
-    s.tu = vec3<f32>(proj[o + 4u], proj[o + 5u], proj[o + 6u]);
-    s.sv = proj[o + 7u];
-    s.tv = vec3<f32>(proj[o + 8u], proj[o + 9u], proj[o + 10u]);
-    s.opacity = proj[o + 11u];
-    s.n = vec3<f32>(proj[o + 12u], proj[o + 13u], proj[o + 14u]);
-    s.mu = vec2<f32>(proj[o + 16u], proj[o + 17u]);
-    return s;
-}
-
 fn add3(base: u32, v: vec3<f32>) {
     accum_add(base, v.x);
     accum_add(base + 1u, v.y);

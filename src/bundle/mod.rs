@@ -9,6 +9,7 @@ pub mod example;
 mod manifest;
 mod source;
 mod summary;
+pub mod transform;
 mod validate;
 mod write;
 

@@ -5,7 +5,8 @@
 //! colour, majority label.
 
 use super::raster::BevRaster;
-use crate::bundle::{Bundle, ClassRole, Mat4Rows, Problem};
+use crate::bundle::transform::{apply, inverse as invert, mul};
+use crate::bundle::{Bundle, ClassRole, Problem};
 use std::collections::HashMap;
 
 /// Accumulated, coloured, labelled LiDAR points in the world frame.
@@ -14,33 +15,6 @@ pub struct LidarCloud {
     pub points: Vec<[f64; 3]>,
     pub colors: Vec<[u8; 3]>,
     pub labels: Vec<u8>,
-}
-
-fn mul(a: &Mat4Rows, b: &Mat4Rows) -> Mat4Rows {
-    let mut m = [[0.0; 4]; 4];
-    for (i, row) in m.iter_mut().enumerate() {
-        for (j, v) in row.iter_mut().enumerate() {
-            *v = (0..4).map(|k| a[i][k] * b[k][j]).sum();
-        }
-    }
-    m
-}
-
-fn apply(a: &Mat4Rows, p: [f64; 3]) -> [f64; 3] {
-    [0, 1, 2].map(|i| a[i][0] * p[0] + a[i][1] * p[1] + a[i][2] * p[2] + a[i][3])
-}
-
-/// World-to-camera of a rigid camera-to-world transform.
-fn invert(a: &Mat4Rows) -> Mat4Rows {
-    let mut m = [[0.0; 4]; 4];
-    for i in 0..3 {
-        for j in 0..3 {
-            m[i][j] = a[j][i];
-        }
-        m[i][3] = -(0..3).map(|k| a[k][i] * a[k][3]).sum::<f64>();
-    }
-    m[3][3] = 1.0;
-    m
 }
 
 /// Frames searched around a sweep's own frame for the nearest camera position.

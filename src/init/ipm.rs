@@ -5,6 +5,7 @@
 //! optimiser's result is compared with.
 
 use super::PoseIndex;
+use crate::bundle::transform::{inverse as rigid_inverse, mul};
 use crate::bundle::{Bundle, ClassRole, Manifest, Mat4Rows, Problem};
 use crate::eval::BevRaster;
 use crate::grid::Grid;
@@ -37,28 +38,6 @@ pub struct Projection {
 pub struct Cams {
     pub list: Vec<CamView>,
     by_frame: Vec<Vec<usize>>,
-}
-
-fn mul(a: &Mat4Rows, b: &Mat4Rows) -> Mat4Rows {
-    let mut m = [[0.0; 4]; 4];
-    for (i, row) in m.iter_mut().enumerate() {
-        for (j, v) in row.iter_mut().enumerate() {
-            *v = (0..4).map(|k| a[i][k] * b[k][j]).sum();
-        }
-    }
-    m
-}
-
-fn rigid_inverse(a: &Mat4Rows) -> Mat4Rows {
-    let mut m = [[0.0; 4]; 4];
-    for i in 0..3 {
-        for j in 0..3 {
-            m[i][j] = a[j][i];
-        }
-        m[i][3] = -(0..3).map(|k| a[k][i] * a[k][3]).sum::<f64>();
-    }
-    m[3][3] = 1.0;
-    m
 }
 
 /// Frames searched for a view of a point: forward cameras see the road from a few

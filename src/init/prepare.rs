@@ -3,7 +3,8 @@
 
 use super::refine::{refine, RefineConfig, RefineReport};
 use super::{initialise, initialise_into, InitConfig, InitResult, PoseIndex, PosePlanes};
-use crate::bundle::{Bundle, Mat4Rows, Problem};
+use crate::bundle::transform::apply;
+use crate::bundle::{Bundle, Problem};
 use crate::grid::{Grid, GridConfig, GridError, Surfels};
 use crate::spatial::PointGrid;
 use serde::Serialize;
@@ -48,10 +49,6 @@ pub struct Prepared {
     /// Refined base cells (lower-left fine coordinates), for the density layer.
     pub refined_cells: Vec<[i32; 2]>,
     pub report: PrepareReport,
-}
-
-fn apply(a: &Mat4Rows, p: [f64; 3]) -> [f64; 3] {
-    [0, 1, 2].map(|i| a[i][0] * p[0] + a[i][1] * p[1] + a[i][2] * p[2] + a[i][3])
 }
 
 /// Every LiDAR point of the bundle in the world frame (through the bundle's poses),

@@ -3,18 +3,9 @@
 //! GPU cannot resolve to millimetres) and surfel parameters in that local frame.
 
 use super::{Params, ViewCamera};
-use crate::bundle::{Manifest, Mat4Rows};
+use crate::bundle::transform::mul;
+use crate::bundle::Manifest;
 use crate::grid::{Grid, Surfels};
-
-fn mul(a: &Mat4Rows, b: &Mat4Rows) -> Mat4Rows {
-    let mut m = [[0.0; 4]; 4];
-    for (i, row) in m.iter_mut().enumerate() {
-        for (j, v) in row.iter_mut().enumerate() {
-            *v = (0..4).map(|k| a[i][k] * b[k][j]).sum();
-        }
-    }
-    m
-}
 
 /// The camera of view `view` of frame `frame`, looking at the world shifted by −origin.
 pub fn view_camera(

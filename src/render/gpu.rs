@@ -17,6 +17,7 @@ use crate::gpu::{AccumStrategy, GpuContext, GpuError};
 use wgpu::util::DeviceExt;
 
 const VIEW_WGSL: &str = include_str!("../../shaders/view.wgsl");
+const LOAD_SURFEL_WGSL: &str = include_str!("../../shaders/load_surfel.wgsl");
 /// Floats per pixel of the packed forward outputs (`PIX_STRIDE` in view.wgsl).
 const PIX_STRIDE: usize = 10;
 
@@ -184,7 +185,11 @@ impl GpuRasterizer {
             ),
             raster: pipe(
                 "rasterize",
-                &[VIEW_WGSL, include_str!("../../shaders/rasterize.wgsl")],
+                &[
+                    VIEW_WGSL,
+                    LOAD_SURFEL_WGSL,
+                    include_str!("../../shaders/rasterize.wgsl"),
+                ],
                 "main",
             ),
             raster_bwd: pipe(
@@ -192,6 +197,7 @@ impl GpuRasterizer {
                 &[
                     strategy.wgsl(),
                     VIEW_WGSL,
+                    LOAD_SURFEL_WGSL,
                     include_str!("../../shaders/rasterize_backward.wgsl"),
                 ],
                 "main",

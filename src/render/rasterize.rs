@@ -104,6 +104,8 @@ pub fn tile_ranges(pairs: &[(u32, u32)], tiles: u32, tile_bits: u32) -> Vec<(usi
     ranges
 }
 
+// Index loops mirror the kernel line by line, which is the point of an oracle.
+#[allow(clippy::needless_range_loop)]
 pub fn render<R: Real>(p: &Params<R>, cam: &ViewCamera, cull: &CullConfig) -> Forward<R> {
     let (projected, pairs) = tile_lists(p, cam, cull);
     let ranges = tile_ranges(

@@ -3,6 +3,7 @@
 use super::raycast::{Hit, Scene};
 use super::rng::Rng;
 use super::world::World;
+pub use crate::bundle::transform::{apply, inverse, mul};
 use crate::bundle::Mat4Rows;
 
 /// Lateral offset of the vehicle from the centreline: the right-hand lane.
@@ -15,31 +16,6 @@ pub fn mat(r: [[f64; 3]; 3], t: [f64; 3]) -> Mat4Rows {
         [r[2][0], r[2][1], r[2][2], t[2]],
         [0.0, 0.0, 0.0, 1.0],
     ]
-}
-
-pub fn mul(a: &Mat4Rows, b: &Mat4Rows) -> Mat4Rows {
-    let mut m = [[0.0; 4]; 4];
-    for (i, row) in m.iter_mut().enumerate() {
-        for (j, v) in row.iter_mut().enumerate() {
-            *v = (0..4).map(|k| a[i][k] * b[k][j]).sum();
-        }
-    }
-    m
-}
-
-/// Inverse of a rigid transform.
-pub fn inverse(a: &Mat4Rows) -> Mat4Rows {
-    let r = [
-        [a[0][0], a[1][0], a[2][0]],
-        [a[0][1], a[1][1], a[2][1]],
-        [a[0][2], a[1][2], a[2][2]],
-    ];
-    let t = [0, 1, 2].map(|i| -(r[i][0] * a[0][3] + r[i][1] * a[1][3] + r[i][2] * a[2][3]));
-    mat(r, t)
-}
-
-pub fn apply(a: &Mat4Rows, p: [f64; 3]) -> [f64; 3] {
-    [0, 1, 2].map(|i| a[i][0] * p[0] + a[i][1] * p[1] + a[i][2] * p[2] + a[i][3])
 }
 
 fn normalize(v: [f64; 3]) -> [f64; 3] {

@@ -40,7 +40,7 @@ pub fn is_safe_path(path: &str) -> bool {
 }
 
 /// A readable set of named files.
-pub trait Source {
+pub trait Source: Send + Sync {
     /// Uncompressed size, or `None` when the file is absent.
     fn size(&self, path: &str) -> Option<u64>;
     /// The whole file, refusing it past the limits.

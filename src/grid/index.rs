@@ -2,14 +2,14 @@
 //! only where the corridor is. A 3.7 km loop costs memory for its corridor, not for
 //! its bounding box, and a neighbour query is one hash lookup and one array read.
 
-use std::collections::HashMap;
+use crate::spatial::CellMap;
 
 const TILE: i32 = 64;
 pub const EMPTY: u32 = u32::MAX;
 
 #[derive(Default, Clone)]
 pub struct IndexMap {
-    tiles: HashMap<(i32, i32), Box<[u32]>>,
+    tiles: CellMap<(i32, i32), Box<[u32]>>,
 }
 
 fn split(i: i32, j: i32) -> ((i32, i32), usize) {

@@ -44,6 +44,9 @@ pub struct Cams {
 /// metres ahead, so the nearest frames alone often do not see it.
 pub const CANDIDATE_FRAMES: usize = 16;
 
+/// Views decoded at once (each 800×225 view is ~0.7 MB decoded).
+const DECODE_CHUNK: usize = 32;
+
 /// Nearer than this a point is behind the lens or distorted beyond use.
 const MIN_DEPTH: f64 = 0.5;
 /// Farther than this a road point is a few pixels wide at best.
@@ -104,10 +107,19 @@ impl Cams {
         frames: usize,
         n: usize,
     ) -> Vec<Projection> {
-        let mut out: Vec<Projection> = poses
+        let near: Vec<usize> = poses
             .nearest(p[0], p[1], frames)
             .into_iter()
-            .flat_map(|(_, f)| {
+            .map(|(_, f)| f)
+            .collect();
+        self.candidates_in(&near, p, n)
+    }
+
+    /// Up to `n` views of `p` among the cameras of `frames`, nearest first.
+    pub fn candidates_in(&self, frames: &[usize], p: [f64; 3], n: usize) -> Vec<Projection> {
+        let mut out: Vec<Projection> = frames
+            .iter()
+            .flat_map(|&f| {
                 self.by_frame[f]
                     .iter()
                     .filter_map(|&c| self.project(c, p))
@@ -159,24 +171,33 @@ where
         let mut keys: Vec<u32> = by_cam.keys().copied().collect();
         keys.sort_unstable();
         let mut next = Vec::new();
-        for c in keys {
-            let cv = &cams.list[c as usize];
-            let view = &m.frames[cv.frame].views[cv.view];
-            let imgs = ViewImages {
-                rgb: b.read_rgb(&view.image)?,
-                label: b.read_label(&view.label)?,
-            };
-            for &(i, r) in &by_cam[&c] {
-                let p = &candidates[i][r];
-                let class = imgs.label.get_pixel(p.u as u32, p.v as u32).0[0];
-                if ignore[class as usize] {
-                    if r + 1 < candidates[i].len() {
-                        next.push((i, r + 1));
+        // Decoding dominates: decode a chunk of views in parallel, then sample them.
+        for chunk in keys.chunks(DECODE_CHUNK) {
+            let decoded = crate::par::par_map(chunk.len(), |k| {
+                let cv = &cams.list[chunk[k] as usize];
+                let view = &m.frames[cv.frame].views[cv.view];
+                Some(b.read_rgb(&view.image).and_then(|rgb| {
+                    Ok(ViewImages {
+                        rgb,
+                        label: b.read_label(&view.label)?,
+                    })
+                }))
+            });
+            for (&c, imgs) in chunk.iter().zip(decoded) {
+                let Some(imgs) = imgs else { continue };
+                let imgs = imgs?;
+                for &(i, r) in &by_cam[&c] {
+                    let p = &candidates[i][r];
+                    let class = imgs.label.get_pixel(p.u as u32, p.v as u32).0[0];
+                    if ignore[class as usize] {
+                        if r + 1 < candidates[i].len() {
+                            next.push((i, r + 1));
+                        }
+                        continue;
                     }
-                    continue;
+                    f(i, &imgs, p);
+                    found += 1;
                 }
-                f(i, &imgs, p);
-                found += 1;
             }
         }
         pending = next;

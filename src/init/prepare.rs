@@ -6,7 +6,6 @@ use super::{initialise, initialise_into, InitConfig, InitResult, PoseIndex, Pose
 use crate::bundle::transform::apply;
 use crate::bundle::{Bundle, Problem};
 use crate::grid::{Grid, GridConfig, GridError, Surfels};
-use crate::spatial::PointGrid;
 use serde::Serialize;
 use thiserror::Error;
 use web_time::Instant;
@@ -94,20 +93,8 @@ pub fn prepare(b: &Bundle, cfg: &PrepareConfig) -> Result<Prepared, PrepareError
     } else {
         Default::default()
     };
-    let lidar = (!lidar_pts.is_empty()).then(|| {
-        (
-            PointGrid::new(&lidar_pts, cfg.grid.resolution),
-            sweeps.as_slice(),
-        )
-    });
-    let (refine_report, refined_cells) = refine(
-        b,
-        &mut grid,
-        &init.z,
-        &poses,
-        lidar.as_ref().map(|(g, s)| (g, *s)),
-        &cfg.refine,
-    )?;
+    let lidar = (!lidar_pts.is_empty()).then_some((lidar_pts.as_slice(), sweeps.as_slice()));
+    let (refine_report, refined_cells) = refine(b, &mut grid, &init.z, &poses, lidar, &cfg.refine)?;
     initialise_into(&grid, &poses, &cfg.init, base, &mut init);
     let refine_ms = t2.elapsed().as_secs_f64() * 1e3;
     let surfels = Surfels::new(

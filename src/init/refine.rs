@@ -2,8 +2,9 @@
 //! `kappa = w_g G + w_s S + w_z Z` from its centre projected into its best view:
 //! G, the strongest luminance gradient in the cell's footprint (marking edges, not
 //! the weaker asphalt texture); S, 1 where the footprint holds more than one road
-//! class (a semantic boundary); Z, the LiDAR height spread in the cell within one
-//! sweep (a curb; across sweeps pose noise would dominate), or
+//! class (a semantic boundary); Z, the LiDAR height spread around the cell (its 3×3
+//! neighbourhood) within one sweep (a curb; across sweeps pose noise would
+//! dominate), or
 //! without LiDAR the twist of the pose-consensus surface over the cell. With the
 //! default weights (0.5 each) and tau_a = 0.6 no single cue refines a cell: a crack
 //! (G alone), noisy labels (S alone) or pose noise in the LiDAR (Z alone) do not; a
@@ -14,7 +15,7 @@ use super::ipm::{sample_best, Cams, Projection, CANDIDATE_FRAMES};
 use super::PoseIndex;
 use crate::bundle::{Bundle, ClassRole, Problem};
 use crate::grid::Grid;
-use crate::spatial::PointGrid;
+use crate::spatial::CellMap;
 use serde::Serialize;
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -70,7 +71,7 @@ pub fn refine(
     grid: &mut Grid,
     z: &[f32],
     poses: &PoseIndex,
-    lidar: Option<(&PointGrid, &[u32])>,
+    lidar: Option<(&[[f64; 3]], &[u32])>,
     cfg: &RefineConfig,
 ) -> Result<(RefineReport, Vec<[i32; 2]>), Problem> {
     let cells = grid.base_cells();
@@ -98,8 +99,23 @@ pub fn refine(
         .collect();
     let t0 = web_time::Instant::now();
     let cams = Cams::new(&b.manifest);
+    // Candidate frames per block of 8×8 cells (0.4 m at 5 cm): one neighbour search
+    // per block instead of per cell.
+    let block_of = |c: [i32; 2]| (c[0].div_euclid(16), c[1].div_euclid(16));
+    let mut blocks: Vec<(i32, i32)> = cells.iter().map(|&c| block_of(c)).collect();
+    blocks.sort_unstable();
+    blocks.dedup();
+    let block_frames: Vec<Vec<usize>> = crate::par::par_map(blocks.len(), |k| {
+        let [x, y] = grid.xy_of(blocks[k].0 * 16 + 8, blocks[k].1 * 16 + 8);
+        poses
+            .nearest(x, y, CANDIDATE_FRAMES)
+            .into_iter()
+            .map(|(_, f)| f)
+            .collect()
+    });
     let candidates: Vec<Vec<Projection>> = crate::par::par_map(centres.len(), |i| {
-        cams.candidates(poses, centres[i], CANDIDATE_FRAMES, 2)
+        let k = blocks.binary_search(&block_of(cells[i])).unwrap_or(0);
+        cams.candidates_in(&block_frames[k], centres[i], 2)
     });
     let road: Vec<bool> = (0..=255u8)
         .map(|id| {
@@ -149,20 +165,25 @@ pub fn refine(
     let t_sample = t0.elapsed().as_secs_f64();
     report.candidates_ms = t_cand * 1e3;
     report.sampling_ms = (t_sample - t_cand) * 1e3;
+    let buckets = lidar.map(|(pts, sweep)| lidar_buckets(pts, sweep, grid));
     let spread: Vec<f64> = crate::par::par_map(cells.len(), |i| {
         let c = cells[i];
-        match lidar {
-            Some((pts, sweep)) => {
-                // (sweep, lowest, highest) of the points near the cell centre.
-                let mut per: Vec<(u32, f64, f64)> = Vec::new();
-                pts.within(centres[i][0], centres[i][1], 1.5 * grid.resolution, |k| {
-                    let z = pts.points()[k][2];
-                    match per.iter_mut().find(|e| e.0 == sweep[k]) {
-                        Some(e) => (e.1, e.2) = (e.1.min(z), e.2.max(z)),
-                        None => per.push((sweep[k], z, z)),
+        match &buckets {
+            Some(b) => {
+                // Per sweep, lowest and highest point in the 3×3 cells around this one.
+                let mut per: Vec<(u32, f32, f32)> = Vec::new();
+                let (bi, bj) = (c[0] / 2, c[1] / 2);
+                for dj in -1..=1 {
+                    for di in -1..=1 {
+                        for &(s, lo, hi) in b.get(&(bi + di, bj + dj)).into_iter().flatten() {
+                            match per.iter_mut().find(|e| e.0 == s) {
+                                Some(e) => (e.1, e.2) = (e.1.min(lo), e.2.max(hi)),
+                                None => per.push((s, lo, hi)),
+                            }
+                        }
                     }
-                });
-                per.iter().map(|e| e.2 - e.1).fold(0.0, f64::max)
+                }
+                per.iter().map(|e| (e.2 - e.1) as f64).fold(0.0, f64::max)
             }
             None => (corner_z(c, 0, 0) + corner_z(c, 2, 2) - corner_z(c, 2, 0) - corner_z(c, 0, 2))
                 .abs(),
@@ -207,4 +228,27 @@ pub fn refine(
     report.refined_cells = refined.len();
     report.added_surfels = grid.len() - before;
     Ok((report, refined))
+}
+
+/// Per base cell, per sweep: (sweep, lowest z, highest z).
+type SweepSpans = CellMap<(i32, i32), Vec<(u32, f32, f32)>>;
+
+/// Per base cell (lattice coordinates of its lower-left vertex), per sweep, the lowest
+/// and highest LiDAR point: built once in O(points), so the per-cell height spread
+/// needs no radius queries.
+fn lidar_buckets(pts: &[[f64; 3]], sweep: &[u32], grid: &Grid) -> SweepSpans {
+    let mut map = SweepSpans::default();
+    for (p, &s) in pts.iter().zip(sweep) {
+        let key = (
+            ((p[0] - grid.origin[0]) / grid.resolution).floor() as i32,
+            ((p[1] - grid.origin[1]) / grid.resolution).floor() as i32,
+        );
+        let z = p[2] as f32;
+        let v = map.entry(key).or_default();
+        match v.iter_mut().find(|e| e.0 == s) {
+            Some(e) => (e.1, e.2) = (e.1.min(z), e.2.max(z)),
+            None => v.push((s, z, z)),
+        }
+    }
+    map
 }

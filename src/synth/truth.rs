@@ -6,19 +6,9 @@ use super::raycast::{shade, to_u8};
 use super::rig::LANE_T;
 use super::world::World;
 use crate::bundle::Mat4Rows;
+use crate::eval::BevRaster;
 use crate::par::par_map;
-use image::{GrayImage, Luma, Rgb, RgbImage};
-
-pub struct Truth {
-    /// World x of the west edge, world y of the north edge.
-    pub origin: [f64; 2],
-    pub width: u32,
-    pub height: u32,
-    pub rgb: RgbImage,
-    pub class_ids: GrayImage,
-    pub elevation: Vec<f32>,
-    pub valid: GrayImage,
-}
+use image::{Luma, Rgb};
 
 /// Distance of road point (s, t) from the trajectory (the lane line from s_a to s_b).
 fn corridor_distance(s: f64, t: f64, s_a: f64, s_b: f64) -> f64 {
@@ -32,7 +22,8 @@ fn corridor_distance(s: f64, t: f64, s_a: f64, s_b: f64) -> f64 {
     ds.hypot(t - LANE_T)
 }
 
-pub fn rasters(world: &World, poses: &[Mat4Rows], half_width: f64, res: f64) -> Truth {
+/// The truth rasters, as the same `BevRaster` that evaluation reads them back into.
+pub fn rasters(world: &World, poses: &[Mat4Rows], half_width: f64, res: f64) -> BevRaster {
     let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
     let mut s_range = (f64::MAX, f64::MIN);
     for p in poses {
@@ -57,15 +48,7 @@ pub fn rasters(world: &World, poses: &[Mat4Rows], half_width: f64, res: f64) -> 
         }
         out
     });
-    let mut truth = Truth {
-        origin,
-        width,
-        height,
-        rgb: RgbImage::new(width, height),
-        class_ids: GrayImage::new(width, height),
-        elevation: vec![0.0; (width * height) as usize],
-        valid: GrayImage::new(width, height),
-    };
+    let mut truth = BevRaster::empty(origin, res, width, height);
     for (row, pixels) in rows.into_iter().enumerate() {
         for (col, p) in pixels.into_iter().enumerate() {
             let Some((rgb, class, z)) = p else { continue };

@@ -19,10 +19,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let o = PROJ_STRIDE * i;
     let depth = proj[o + 2u];
-    let tx0 = bitcast<u32>(proj[o + 18u]);
-    let ty0 = bitcast<u32>(proj[o + 19u]);
-    let tx1 = bitcast<u32>(proj[o + 20u]);
-    let ty1 = bitcast<u32>(proj[o + 21u]);
+    let t0 = bitcast<u32>(proj[o + 18u]);
+    let t1 = bitcast<u32>(proj[o + 19u]);
+    let tx0 = t0 & 0xffffu;
+    let ty0 = t0 >> 16u;
+    let tx1 = t1 & 0xffffu;
+    let ty1 = t1 >> 16u;
     let bits = 32u - view.tile_bits;
     // tile_bits ≥ 1, so bits ≤ 31 and the shift cannot overflow.
     let top = (1u << bits) - 1u;

@@ -14,3 +14,9 @@ fn load_surfel(i: u32) -> Surfel {
     s.mu = vec2<f32>(proj[o + 16u], proj[o + 17u]);
     return s;
 }
+
+/// The pixel rectangle outside which the surfel's alpha is below 1/255 (project.wgsl).
+fn load_reach(i: u32) -> vec4<f32> {
+    let o = PROJ_STRIDE * i;
+    return vec4<f32>(proj[o + 15u], proj[o + 20u], proj[o + 21u], proj[o + 22u]);
+}

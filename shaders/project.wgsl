@@ -1,6 +1,9 @@
 //! project: per surfel, cull to the box in front of the camera, transform centre,
 //! tangent axes and normal to camera space, project the centre, and bound the ±3σ
-//! footprint (and the ±2 px low-pass floor) in tiles. Writes the projected surfel and
+//! footprint (and the ±2 px low-pass floor) in tiles. Also bounds, in pixels, where the
+//! surfel can reach alpha ≥ 1/255 at all (±3.5σ and ±2.5 px, see `reach_rect`), so that
+//! the compositing kernels skip far pixels of a tile with four compares instead of a
+//! ray–plane evaluation: a pure speed-up that changes no output. Writes the projected surfel and
 //! its tile count (0 when culled). One invocation per surfel, 256 per workgroup
 //! (the browser maximum), 2D grid for more than 65535 workgroups.
 //!
@@ -21,6 +24,27 @@ fn to_cam(p: vec3<f32>) -> vec3<f32> {
 
 fn rot_to_cam(v: vec3<f32>) -> vec3<f32> {
     return vec3<f32>(dot(view.w2c0.xyz, v), dot(view.w2c1.xyz, v), dot(view.w2c2.xyz, v));
+}
+
+/// Pixel rectangle (x0, y0, x1, y1) outside which alpha < 1/255 for any opacity:
+/// alpha ≥ 1/255 needs ρ ≤ 2 ln 255 ≈ 11.1, i.e. the low-pass distance ≤ 2.36 px or the
+/// ray hitting the plane within 3.33σ, whose projection lies in the hull of the ±3.5σ
+/// corners while they are in front of the camera (else the whole screen).
+fn reach_rect(pc: vec3<f32>, tu: vec3<f32>, tv: vec3<f32>, su: f32, sv: f32, mu: vec2<f32>) -> vec4<f32> {
+    var lo = mu - vec2<f32>(2.5);
+    var hi = mu + vec2<f32>(2.5);
+    for (var c = 0u; c < 4u; c++) {
+        let a = select(-3.5, 3.5, (c & 1u) != 0u);
+        let b = select(-3.5, 3.5, (c & 2u) != 0u);
+        let corner = pc + a * su * tu + b * sv * tv;
+        if corner.z < 0.1 * view.near {
+            return vec4<f32>(-BIG, -BIG, BIG, BIG);
+        }
+        let uv = vec2<f32>(view.fx * corner.x / corner.z + view.cx, view.fy * corner.y / corner.z + view.cy);
+        lo = min(lo, uv);
+        hi = max(hi, uv);
+    }
+    return vec4<f32>(lo, hi);
 }
 
 @compute @workgroup_size(256)
@@ -57,6 +81,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         lo = min(lo, uv);
         hi = max(hi, uv);
     }
+    let reach = reach_rect(pc, tu, tv, su, sv, mu);
     let wh = vec2<f32>(f32(view.width), f32(view.height));
     if hi.x < 0.0 || hi.y < 0.0 || lo.x >= wh.x || lo.y >= wh.y {
         return;
@@ -82,11 +107,14 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     proj[o + 12u] = n.x;
     proj[o + 13u] = n.y;
     proj[o + 14u] = n.z;
+    proj[o + 15u] = reach.x;
     proj[o + 16u] = mu.x;
     proj[o + 17u] = mu.y;
-    proj[o + 18u] = bitcast<f32>(tx0);
-    proj[o + 19u] = bitcast<f32>(ty0);
-    proj[o + 20u] = bitcast<f32>(tx1);
-    proj[o + 21u] = bitcast<f32>(ty1);
+    // Tile bounds fit 16 bits (at most 65535 tiles per axis), packed in pairs.
+    proj[o + 18u] = bitcast<f32>(tx0 | (ty0 << 16u));
+    proj[o + 19u] = bitcast<f32>(tx1 | (ty1 << 16u));
+    proj[o + 20u] = reach.y;
+    proj[o + 21u] = reach.z;
+    proj[o + 22u] = reach.w;
     tile_count[i] = (tx1 - tx0) * (ty1 - ty0);
 }

@@ -1,9 +1,13 @@
-//! rasterize (forward): one workgroup per 16×16 tile, one invocation per pixel. The
-//! tile's depth-sorted surfels are loaded 256 at a time into workgroup memory (each
-//! invocation fetches one), then every pixel composites the batch front to back,
-//! evaluating each surfel where its ray meets the surfel's plane (`eval_surfel`),
-//! stopping once transmittance would drop below 1e-4. Logits have a runtime channel
-//! count, so they accumulate in the output buffer rather than in registers.
+//! rasterize (forward): one workgroup per 8×8 tile, one invocation per pixel, each
+//! compositing its tile's depth-sorted surfels front to back, evaluating each where its
+//! ray meets the surfel's plane (`eval_surfel`) and stopping once transmittance would
+//! drop below 1e-4. A four-compare reach test (`out_of_reach`) comes before the
+//! evaluation: most pairs of a far tile are out of reach, and pixels that never
+//! saturate (sky, road beyond the far plane) walk the whole list. Measured on lavapipe:
+//! 8×8 tiles halve the time of 16×16 ones (pixels that never saturate walk fewer
+//! surfels; 4×4 loses it again to the extra pairs), and staging the list in workgroup
+//! memory behind barriers gained nothing over reading storage directly. Logits have a
+//! runtime channel count, so they accumulate in the output buffer, not in registers.
 //!
 //! Oracle: src/render/rasterize.rs.
 
@@ -19,11 +23,9 @@
 @group(0) @binding(6) var<storage, read_write> px_out: array<f32>;
 @group(0) @binding(7) var<storage, read_write> out_logits: array<f32>;
 
-var<workgroup> batch: array<Surfel, 256>;
-var<workgroup> batch_id: array<u32, 256>;
 var<workgroup> range: vec2<u32>;
 
-@compute @workgroup_size(16, 16)
+@compute @workgroup_size(8, 8)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>, @builtin(local_invocation_index) li: u32) {
     let tile = wg.x + wg.y * view.tiles_x;
     let x = wg.x * TILE + lid.x;
@@ -46,42 +48,30 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
     var c = vec3<f32>(0.0);
     var depth = 0.0;
     var last_k = 0u;
-    var done = !inside;
-    let batches = (r.y - r.x + 255u) / 256u;
-    for (var b = 0u; b < batches; b++) {
-        let base = r.x + b * 256u;
-        let k = base + li;
-        if k < r.y {
+    if inside {
+        for (var k = r.x; k < r.y; k++) {
             let id = order[k];
-            batch_id[li] = id;
-            batch[li] = load_surfel(id);
-        }
-        workgroupBarrier();
-        if !done {
-            let m = min(256u, r.y - base);
-            for (var j = 0u; j < m; j++) {
-                let s = batch[j];
-                let e = eval_surfel(s, px, py, view);
-                if e.alpha < MIN_ALPHA {
-                    continue;
-                }
-                let t_next = t * (1.0 - e.alpha);
-                if t_next < MIN_TRANSMITTANCE {
-                    done = true;
-                    break;
-                }
-                let w = e.alpha * t;
-                let id = batch_id[j];
-                c += vec3<f32>(rgb[3u * id], rgb[3u * id + 1u], rgb[3u * id + 2u]) * w;
-                for (var q = 0u; q < ch; q++) {
-                    out_logits[pix * ch + q] += logits[id * ch + q] * w;
-                }
-                depth += s.pc.z * w;
-                t = t_next;
-                last_k = base + j + 1u;
+            if out_of_reach(load_reach(id), px, py) {
+                continue;
             }
+            let s = load_surfel(id);
+            let e = eval_surfel(s, px, py, view);
+            if e.alpha < MIN_ALPHA {
+                continue;
+            }
+            let t_next = t * (1.0 - e.alpha);
+            if t_next < MIN_TRANSMITTANCE {
+                break;
+            }
+            let w = e.alpha * t;
+            c += vec3<f32>(rgb[3u * id], rgb[3u * id + 1u], rgb[3u * id + 2u]) * w;
+            for (var q = 0u; q < ch; q++) {
+                out_logits[pix * ch + q] += logits[id * ch + q] * w;
+            }
+            depth += s.pc.z * w;
+            t = t_next;
+            last_k = k + 1u;
         }
-        workgroupBarrier();
     }
     if !inside {
         return;

@@ -1,11 +1,13 @@
 //! rasterize_backward: the forward kernel's pairs traversed back to front. One
-//! workgroup per tile; batches of 256 surfels are loaded from the end of the tile's
-//! list; each pixel walks the batch in reverse over the entries it composited (below
-//! its `last`), recovering transmittance by division (alpha ≤ 0.99 keeps it stable),
-//! and adds its share of each camera-space gradient with `accum_add` (native f32
-//! atomics, or CAS in browsers; `accum` is bound at 0 by the prepended snippet). The
-//! exposure gradient is reduced over the workgroup first, then added once.
-//! Logit accumulators (runtime channel count) live in a per-pixel scratch buffer.
+//! workgroup per 8×8 tile, one invocation per pixel, each walking its tile's list back
+//! from its own `last` contributor (so surfels behind its termination are never read),
+//! recovering transmittance by division (alpha ≤ 0.99 keeps it stable), and adding its
+//! share of each camera-space gradient with `accum_add` (native f32 atomics, or CAS in
+//! browsers; `accum` is bound at 0 by the prepended snippet). Pixels read the list
+//! straight from storage: on lavapipe, staging batches in workgroup memory behind
+//! barriers was no faster. The exposure gradient is reduced over the workgroup first,
+//! then added once. Logit accumulators (runtime channel count) live in a per-pixel
+//! scratch buffer.
 //!
 //! Oracle: src/render/rasterize_backward.rs; slot layout `slot::*` there.
 
@@ -32,10 +34,8 @@ const S_OPACITY: u32 = 14u;
 const S_RGB: u32 = 15u;
 const S_LOGITS: u32 = 18u;
 
-var<workgroup> batch: array<Surfel, 256>;
-var<workgroup> batch_id: array<u32, 256>;
 var<workgroup> range: vec2<u32>;
-var<workgroup> red: array<vec2<f32>, 256>;
+var<workgroup> red: array<vec2<f32>, 64>;
 
 fn add3(base: u32, v: vec3<f32>) {
     accum_add(base, v.x);
@@ -43,7 +43,7 @@ fn add3(base: u32, v: vec3<f32>) {
     accum_add(base + 2u, v.z);
 }
 
-@compute @workgroup_size(16, 16)
+@compute @workgroup_size(8, 8)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>, @builtin(local_invocation_index) li: u32) {
     let tile = wg.x + wg.y * view.tiles_x;
     let x = wg.x * TILE + lid.x;
@@ -86,84 +86,70 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
     var last_alpha = 0.0;
     var acc_d = 0.0;
     var last_d = 0.0;
-    let batches = (r.y - r.x + 255u) / 256u;
-    for (var bb = 0u; bb < batches; bb++) {
-        let b = batches - 1u - bb;
-        let base = r.x + b * 256u;
-        let k = base + li;
-        if k < r.y {
-            let id = order[k];
-            batch_id[li] = id;
-            batch[li] = load_surfel(id);
+    // Pixels outside the view have my_last = 0 and walk nothing.
+    for (var k = max(my_last, r.x); k > r.x; k--) {
+        let id = order[k - 1u];
+        if out_of_reach(load_reach(id), px, py) {
+            continue;
         }
-        workgroupBarrier();
-        let m = min(256u, r.y - base);
-        for (var jj = 0u; jj < m; jj++) {
-            let j = m - 1u - jj;
-            if !inside || base + j >= my_last {
-                continue;
-            }
-            let s = batch[j];
-            let e = eval_surfel(s, px, py, view);
-            if e.alpha < MIN_ALPHA {
-                continue;
-            }
-            let id = batch_id[j];
-            t = t / (1.0 - e.alpha);
-            let w = e.alpha * t;
-            let g0 = stride * id;
-            let c = vec3<f32>(rgb[3u * id], rgb[3u * id + 1u], rgb[3u * id + 2u]);
-            acc_c = last_alpha * last_c + (1.0 - last_alpha) * acc_c;
-            last_c = c;
-            var d_alpha = dot(c - acc_c, dc);
-            add3(g0 + S_RGB, w * dc);
-            let sp = pix * 2u * ch;
-            for (var q = 0u; q < ch; q++) {
-                let l = logits[id * ch + q];
-                let acc = last_alpha * scratch[sp + ch + q] + (1.0 - last_alpha) * scratch[sp + q];
-                scratch[sp + q] = acc;
-                scratch[sp + ch + q] = l;
-                let dl = g_logits[pix * ch + q];
-                d_alpha += (l - acc) * dl;
-                accum_add(g0 + S_LOGITS + q, w * dl);
-            }
-            acc_d = last_alpha * last_d + (1.0 - last_alpha) * acc_d;
-            last_d = s.pc.z;
-            d_alpha += (s.pc.z - acc_d) * dd;
-            d_alpha = d_alpha * t + t_fin / (1.0 - e.alpha) * da_out;
-            last_alpha = e.alpha;
-            var dpc = vec3<f32>(0.0, 0.0, w * dd);
-            if e.raw_alpha <= MAX_ALPHA {
-                let sig = s.opacity;
-                accum_add(g0 + S_OPACITY, d_alpha * e.g * sig * (1.0 - sig));
-                let d_rho = d_alpha * sig * -0.5 * e.g;
-                if e.ray_hit {
-                    let gu = d_rho * 2.0 * e.u;
-                    let gv = d_rho * 2.0 * e.v;
-                    accum_add(g0 + S_SU, -gu * e.u / s.su);
-                    accum_add(g0 + S_SV, -gv * e.v / s.sv);
-                    add3(g0 + S_TU, gu * e.q / s.su);
-                    add3(g0 + S_TV, gv * e.q / s.sv);
-                    let gq = gu * s.tu / s.su + gv * s.tv / s.sv;
-                    let nd = dot(s.n, e.d);
-                    let d_lambda = dot(gq, e.d);
-                    dpc += -gq + d_lambda * s.n / nd;
-                    add3(g0 + S_N, d_lambda * (s.pc - e.d * e.lambda) / nd);
-                } else {
-                    let k2 = -2.0 * LOWPASS_INV_SQ * d_rho;
-                    let dmu = k2 * e.delta;
-                    let z = s.pc.z;
-                    dpc += vec3<f32>(dmu.x * view.fx / z, dmu.y * view.fy / z, -(dmu.x * view.fx * s.pc.x + dmu.y * view.fy * s.pc.y) / (z * z));
-                }
-            }
-            add3(g0 + S_PC, dpc);
+        let s = load_surfel(id);
+        let e = eval_surfel(s, px, py, view);
+        if e.alpha < MIN_ALPHA {
+            continue;
         }
-        workgroupBarrier();
+        t = t / (1.0 - e.alpha);
+        let w = e.alpha * t;
+        let g0 = stride * id;
+        let c = vec3<f32>(rgb[3u * id], rgb[3u * id + 1u], rgb[3u * id + 2u]);
+        acc_c = last_alpha * last_c + (1.0 - last_alpha) * acc_c;
+        last_c = c;
+        var d_alpha = dot(c - acc_c, dc);
+        add3(g0 + S_RGB, w * dc);
+        let sp = pix * 2u * ch;
+        for (var q = 0u; q < ch; q++) {
+            let l = logits[id * ch + q];
+            let acc = last_alpha * scratch[sp + ch + q] + (1.0 - last_alpha) * scratch[sp + q];
+            scratch[sp + q] = acc;
+            scratch[sp + ch + q] = l;
+            let dl = g_logits[pix * ch + q];
+            d_alpha += (l - acc) * dl;
+            accum_add(g0 + S_LOGITS + q, w * dl);
+        }
+        acc_d = last_alpha * last_d + (1.0 - last_alpha) * acc_d;
+        last_d = s.pc.z;
+        d_alpha += (s.pc.z - acc_d) * dd;
+        d_alpha = d_alpha * t + t_fin / (1.0 - e.alpha) * da_out;
+        last_alpha = e.alpha;
+        var dpc = vec3<f32>(0.0, 0.0, w * dd);
+        if e.raw_alpha <= MAX_ALPHA {
+            let sig = s.opacity;
+            accum_add(g0 + S_OPACITY, d_alpha * e.g * sig * (1.0 - sig));
+            let d_rho = d_alpha * sig * -0.5 * e.g;
+            if e.ray_hit {
+                let gu = d_rho * 2.0 * e.u;
+                let gv = d_rho * 2.0 * e.v;
+                accum_add(g0 + S_SU, -gu * e.u / s.su);
+                accum_add(g0 + S_SV, -gv * e.v / s.sv);
+                add3(g0 + S_TU, gu * e.q / s.su);
+                add3(g0 + S_TV, gv * e.q / s.sv);
+                let gq = gu * s.tu / s.su + gv * s.tv / s.sv;
+                let nd = dot(s.n, e.d);
+                let d_lambda = dot(gq, e.d);
+                dpc += -gq + d_lambda * s.n / nd;
+                add3(g0 + S_N, d_lambda * (s.pc - e.d * e.lambda) / nd);
+            } else {
+                let k2 = -2.0 * LOWPASS_INV_SQ * d_rho;
+                let dmu = k2 * e.delta;
+                let z = s.pc.z;
+                dpc += vec3<f32>(dmu.x * view.fx / z, dmu.y * view.fy / z, -(dmu.x * view.fx * s.pc.x + dmu.y * view.fy * s.pc.y) / (z * z));
+            }
+        }
+        add3(g0 + S_PC, dpc);
     }
     // The exposure gradient: one add per workgroup instead of one per pixel.
     red[li] = dexp;
     workgroupBarrier();
-    for (var off = 128u; off > 0u; off = off / 2u) {
+    for (var off = 32u; off > 0u; off = off / 2u) {
         if li < off {
             red[li] += red[li + off];
         }

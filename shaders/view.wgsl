@@ -28,7 +28,7 @@ const PROJ_STRIDE: u32 = 24u;
 const PIX_STRIDE: u32 = 10u;
 /// Per-pixel loss gradients: rgb 3, depth, alpha.
 const GRAD_STRIDE: u32 = 5u;
-const TILE: u32 = 16u;
+const TILE: u32 = 8u;
 const MIN_ALPHA: f32 = 0.003921569;
 const MAX_ALPHA: f32 = 0.99;
 const MIN_TRANSMITTANCE: f32 = 0.0001;
@@ -45,6 +45,11 @@ struct Surfel {
     opacity: f32,
     n: vec3<f32>,
     mu: vec2<f32>,
+}
+
+/// Whether pixel (px, py) lies outside a surfel's reach rectangle (x0, y0, x1, y1).
+fn out_of_reach(r: vec4<f32>, px: f32, py: f32) -> bool {
+    return px < r.x || py < r.y || px > r.z || py > r.w;
 }
 
 /// One surfel evaluated at one pixel (see src/render/rasterize.rs, `Eval`).

@@ -10,7 +10,7 @@
 
 use super::project::tile_bits;
 use super::rasterize_backward::{OutputGrads, VIEW_GRAD};
-use super::{CullConfig, Image, Params, ViewCamera};
+use super::{CullConfig, Image, Params, ViewCamera, TILE};
 use crate::gpu::radix_sort::{RadixSorter, SortPairs, SortedIn};
 use crate::gpu::readback::{read_bytes, read_f32};
 use crate::gpu::{AccumStrategy, GpuContext, GpuError};
@@ -485,7 +485,7 @@ impl GpuRasterizer {
             &mut enc,
             &self.raster_bwd,
             &bg,
-            (f.width.div_ceil(16), f.height.div_ceil(16), 1),
+            (f.width.div_ceil(TILE), f.height.div_ceil(TILE), 1),
         );
         let (gx, gy) = ctx.dispatch_2d((n as u32).div_ceil(256));
         let grid = uniform(ctx, "grid", bytemuck::cast_slice(&[gx * 256, 0u32, 0, 0]));

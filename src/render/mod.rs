@@ -23,7 +23,7 @@ pub mod scene;
 use real::Real;
 
 /// Tile side in pixels.
-pub const TILE: u32 = 16;
+pub const TILE: u32 = 8;
 /// Contributions below this alpha are skipped (as in 3DGS).
 pub const MIN_ALPHA: f64 = 1.0 / 255.0;
 /// Alpha is clamped here so that transmittance can be divided back out.

@@ -4,14 +4,19 @@
 //! The data path, one module per stage: bundle → grid → init → render → loss →
 //! optim → bev → export (see docs/ARCHITECTURE.md for what exists today).
 
+pub mod bev;
 pub mod bundle;
 pub mod eval;
+pub mod export;
 pub mod gpu;
 pub mod grid;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod import;
 pub mod init;
+pub mod loss;
+pub mod optim;
 pub mod par;
+pub mod reconstruct;
 pub mod render;
 pub mod spatial;
 pub mod synth;

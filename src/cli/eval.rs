@@ -3,8 +3,8 @@
 
 use super::EXIT_INVALID_INPUT;
 use crate::bundle::{Bundle, Limits};
-use crate::eval::pseudo_gt::{cloud_grid, lidar_cloud, rasterise};
-use crate::eval::{elevation_vs_points, evaluate, road_classes, BevRaster, Metrics};
+use crate::eval::pseudo_gt::{lidar_cloud, rasterise};
+use crate::eval::{evaluate, road_classes, BevRaster, Metrics};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -120,22 +120,9 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
             .as_ref()
             .ok_or("give --pred DIR (a predicted BEV map) or --pseudo-gt")?;
         let (pred, points) = load_pred(dir)?;
-        match truth {
-            Some(t) => evaluate(&pred, &points, &t, &road),
-            None => {
-                let cloud = lidar_cloud(&bundle).map_err(|e| e.to_string())?;
-                let grid = cloud_grid(&cloud, a.resolution).ok_or(
-                    "the bundle has neither ground truth nor LiDAR: nothing to evaluate against",
-                )?;
-                let reference = rasterise(&cloud, &grid);
-                let mut m = evaluate(&pred, &[], &reference, &road);
-                let e = elevation_vs_points(&points, &cloud.points, 0.1);
-                m.elevation_rmse_m = e.map(|e| e.rmse);
-                m.elevation_mae_m = e.map(|e| e.mae);
-                m.elevation_p95_m = e.map(|e| e.p95);
-                m
-            }
-        }
+        crate::eval::score(&bundle, truth.as_ref(), &pred, &points, a.resolution)
+            .map_err(|e| e.to_string())?
+            .ok_or("the bundle has neither ground truth nor LiDAR: nothing to evaluate against")?
     };
     println!(
         "{}",

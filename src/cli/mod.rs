@@ -7,6 +7,7 @@ mod gpu;
 mod import;
 mod inspect;
 pub mod progress;
+mod reconstruct;
 mod synth;
 
 use clap::{Parser, Subcommand};
@@ -74,6 +75,17 @@ enum Command {
     /// problem listed when it is invalid). docs/IMPORT.md describes the layouts and
     /// every transform.
     Import(import::Args),
+    /// Reconstruct the road surface: BEV map layers, surfel PLY and a report.
+    ///
+    /// Prepares the surfel grid along the trajectory, colours it from the best
+    /// training views (the IPM baseline), optimises it on the GPU for the requested
+    /// epochs, renders the BEV layers and scores them against the bundle's truth or
+    /// LiDAR when present. Writes to --out: rgb.png, semantic.png, semantic_ids.png,
+    /// elevation.png (with legend), elevation.npy / elevation.f32 with bev.json
+    /// (georeference), confidence.png, density.png, error.png (with truth),
+    /// surfels.ply and report.json. A NaN during optimisation stops it, keeps the
+    /// last good model, still writes the outputs and exits non-zero.
+    Reconstruct(reconstruct::Args),
 }
 
 pub fn run() -> ExitCode {
@@ -86,6 +98,7 @@ pub fn run() -> ExitCode {
         Command::Eval(a) => eval::run(a),
         Command::Bench(b) => bench::run(b),
         Command::Import(a) => import::run(a),
+        Command::Reconstruct(a) => reconstruct::run(a),
     };
     match result {
         Ok(code) => code,

@@ -9,7 +9,7 @@ pub use metrics::{
 };
 pub use raster::BevRaster;
 
-use crate::bundle::{ClassRole, Manifest};
+use crate::bundle::{Bundle, ClassRole, Manifest, Problem};
 
 /// Ids of the classes with role `road`.
 pub fn road_classes(m: &Manifest) -> Vec<u8> {
@@ -35,4 +35,31 @@ pub fn evaluate(
         elevation_mae_m: e.map(|e| e.mae),
         elevation_p95_m: e.map(|e| e.p95),
     }
+}
+
+/// Scores a prediction against the bundle's truth raster, or, without one, against
+/// the LiDAR pseudo-ground-truth at `resolution` (elevation at surfel centres against
+/// the nearest LiDAR point within 0.1 m). `None` when the bundle has neither.
+pub fn score(
+    b: &Bundle,
+    truth: Option<&BevRaster>,
+    pred: &BevRaster,
+    points: &[[f64; 3]],
+    resolution: f64,
+) -> Result<Option<Metrics>, Problem> {
+    let road = road_classes(&b.manifest);
+    if let Some(t) = truth {
+        return Ok(Some(evaluate(pred, points, t, &road)));
+    }
+    let cloud = pseudo_gt::lidar_cloud(b)?;
+    let Some(grid) = pseudo_gt::cloud_grid(&cloud, resolution) else {
+        return Ok(None);
+    };
+    let reference = pseudo_gt::rasterise(&cloud, &grid);
+    let mut m = evaluate(pred, &[], &reference, &road);
+    let e = elevation_vs_points(points, &cloud.points, 0.1);
+    m.elevation_rmse_m = e.map(|e| e.rmse);
+    m.elevation_mae_m = e.map(|e| e.mae);
+    m.elevation_p95_m = e.map(|e| e.p95);
+    Ok(Some(m))
 }

@@ -5,6 +5,7 @@
 //! `atomic<f32>` add (Vulkan drivers such as lavapipe) we use it; browsers have none,
 //! so there kernels use a compare-and-swap loop on `atomic<u32>` bit patterns.
 
+pub mod buffers;
 pub mod radix_sort;
 pub mod readback;
 pub mod scatter_add;

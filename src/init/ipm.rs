@@ -240,3 +240,36 @@ pub fn mosaic(b: &Bundle, grid: &Grid, z: &[f32], poses: &PoseIndex) -> Result<B
     })?;
     Ok(out)
 }
+
+/// A surfel's colour (0..1) and class id from its best view.
+pub type SurfelColour = ([f32; 3], u8);
+
+/// Colour (0..1) and class id of every surfel from its best view among the frames
+/// `use_frame` accepts: the starting point of optimisation, and the IPM baseline
+/// model when nothing else changes. Surfels no accepted view sees get `None`.
+pub fn surfel_colours(
+    b: &Bundle,
+    grid: &Grid,
+    z: &[f32],
+    poses: &PoseIndex,
+    use_frame: &(dyn Fn(usize) -> bool + Sync),
+) -> Result<Vec<Option<SurfelColour>>, Problem> {
+    let cams = Cams::new(&b.manifest);
+    let candidates: Vec<Vec<Projection>> = crate::par::par_map(grid.len(), |k| {
+        let [x, y] = grid.xy(k);
+        let near: Vec<usize> = poses
+            .nearest(x, y, CANDIDATE_FRAMES)
+            .into_iter()
+            .map(|(_, f)| f)
+            .filter(|&f| use_frame(f))
+            .collect();
+        cams.candidates_in(&near, [x, y, z[k] as f64], 3)
+    });
+    let mut out = vec![None; grid.len()];
+    sample_best(b, &cams, &candidates, |k, imgs, p| {
+        let c = imgs.rgb.get_pixel(p.u as u32, p.v as u32).0;
+        let id = imgs.label.get_pixel(p.u as u32, p.v as u32).0[0];
+        out[k] = Some((c.map(|v| v as f32 / 255.0), id));
+    })?;
+    Ok(out)
+}

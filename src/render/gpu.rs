@@ -11,10 +11,10 @@
 use super::project::tile_bits;
 use super::rasterize_backward::{OutputGrads, VIEW_GRAD};
 use super::{CullConfig, Image, Params, ViewCamera, TILE};
+use crate::gpu::buffers::{bind, dispatch, init_storage, pipeline, storage, uniform};
 use crate::gpu::radix_sort::{RadixSorter, SortPairs, SortedIn};
 use crate::gpu::readback::{read_bytes, read_f32};
 use crate::gpu::{AccumStrategy, GpuContext, GpuError};
-use wgpu::util::DeviceExt;
 
 const VIEW_WGSL: &str = include_str!("../../shaders/view.wgsl");
 const LOAD_SURFEL_WGSL: &str = include_str!("../../shaders/load_surfel.wgsl");
@@ -62,38 +62,8 @@ pub struct GpuForward {
     pub channels: u32,
 }
 
-fn storage(ctx: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
-    ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: bytes.max(16),
-        usage: wgpu::BufferUsages::STORAGE
-            | wgpu::BufferUsages::COPY_SRC
-            | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    })
-}
-
-fn init_storage(ctx: &GpuContext, label: &str, data: &[u8]) -> wgpu::Buffer {
-    let mut bytes = data.to_vec();
-    bytes.resize(bytes.len().max(16), 0);
-    ctx.device
-        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(label),
-            contents: &bytes,
-            usage: wgpu::BufferUsages::STORAGE
-                | wgpu::BufferUsages::COPY_SRC
-                | wgpu::BufferUsages::COPY_DST,
-        })
-}
-
-fn uniform(ctx: &GpuContext, label: &str, data: &[u8]) -> wgpu::Buffer {
-    ctx.device
-        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(label),
-            contents: data,
-            usage: wgpu::BufferUsages::UNIFORM,
-        })
-}
+/// Byte offset of (exposure_a, exposure_b) in the `View` uniform.
+const VIEW_EXPOSURE_OFFSET: u64 = 4 * 23;
 
 /// The `View` uniform of shaders/view.wgsl.
 fn view_bytes(cam: &ViewCamera, cull: &CullConfig, count: u32, channels: u32) -> Vec<u8> {
@@ -108,37 +78,6 @@ fn view_bytes(cam: &ViewCamera, cull: &CullConfig, count: u32, channels: u32) ->
     bytemuck::cast_slice(&f).to_vec()
 }
 
-fn bind(
-    ctx: &GpuContext,
-    p: &wgpu::ComputePipeline,
-    entries: &[(u32, &wgpu::Buffer)],
-) -> wgpu::BindGroup {
-    let entries: Vec<wgpu::BindGroupEntry> = entries
-        .iter()
-        .map(|(b, buf)| wgpu::BindGroupEntry {
-            binding: *b,
-            resource: buf.as_entire_binding(),
-        })
-        .collect();
-    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: None,
-        layout: &p.get_bind_group_layout(0),
-        entries: &entries,
-    })
-}
-
-fn dispatch(
-    enc: &mut wgpu::CommandEncoder,
-    p: &wgpu::ComputePipeline,
-    bg: &wgpu::BindGroup,
-    groups: (u32, u32, u32),
-) {
-    let mut pass = enc.begin_compute_pass(&Default::default());
-    pass.set_pipeline(p);
-    pass.set_bind_group(0, bg, &[]);
-    pass.dispatch_workgroups(groups.0, groups.1, groups.2);
-}
-
 impl GpuRasterizer {
     /// Pipelines using the adapter's preferred gradient accumulation.
     pub async fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
@@ -150,18 +89,7 @@ impl GpuRasterizer {
         ctx: &GpuContext,
         strategy: AccumStrategy,
     ) -> Result<Self, GpuError> {
-        let pipe = |label: &str, parts: &[&str], entry: &str| {
-            let module = ctx.shader(label, parts);
-            ctx.device
-                .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(label),
-                    layout: None,
-                    module: &module,
-                    entry_point: Some(entry),
-                    compilation_options: Default::default(),
-                    cache: None,
-                })
-        };
+        let pipe = |label: &str, parts: &[&str], entry: &str| pipeline(ctx, label, parts, entry);
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let scan = include_str!("../../shaders/scan.wgsl");
         let me = Self {
@@ -247,6 +175,20 @@ impl GpuRasterizer {
         cam: &ViewCamera,
         cull: &CullConfig,
     ) -> Result<GpuForward, GpuError> {
+        self.forward_with(ctx, p, cam, cull, None).await
+    }
+
+    /// The forward pass; with `exposure` = (buffer, byte offset), the view's exposure
+    /// (a, b) is copied on the GPU from there instead of taken from `cam`, so that an
+    /// optimiser can keep it on the GPU.
+    pub async fn forward_with(
+        &self,
+        ctx: &GpuContext,
+        p: &GpuParams,
+        cam: &ViewCamera,
+        cull: &CullConfig,
+        exposure: Option<(&wgpu::Buffer, u64)>,
+    ) -> Result<GpuForward, GpuError> {
         let n = p.count;
         let view = uniform(ctx, "view", &view_bytes(cam, cull, n, p.channels));
         let (gx, gy) = ctx.dispatch_2d(n.div_ceil(256));
@@ -259,6 +201,9 @@ impl GpuRasterizer {
         let total = storage(ctx, "total", 16);
         let scan_params = uniform(ctx, "scan", bytemuck::cast_slice(&[n, blocks, gx * 256, 0]));
         let mut enc = ctx.device.create_command_encoder(&Default::default());
+        if let Some((buf, offset)) = exposure {
+            enc.copy_buffer_to_buffer(buf, offset, &view, VIEW_EXPOSURE_OFFSET, 8);
+        }
         let bg = bind(
             ctx,
             &self.project,
@@ -432,7 +377,69 @@ impl GpuRasterizer {
         })
     }
 
-    /// Parameter gradients (same layout as `Params`) and the exposure gradient.
+    /// Records the backward pass: per-pixel loss gradients `g_px` (GRAD_STRIDE per
+    /// pixel: rgb 3, depth, alpha) and `g_logits` to parameter gradients in `grads`
+    /// (`13 + channels` per surfel: position 3, rotation 4, log-scales 2, opacity, rgb
+    /// 3, logits), through `view_grad` (`VIEW_GRAD + channels` per surfel, then the
+    /// exposure gradient d/da, d/db), which this clears first.
+    #[allow(clippy::too_many_arguments)]
+    pub fn encode_backward(
+        &self,
+        ctx: &GpuContext,
+        enc: &mut wgpu::CommandEncoder,
+        p: &GpuParams,
+        f: &GpuForward,
+        g_px: &wgpu::Buffer,
+        g_logits: &wgpu::Buffer,
+        view_grad: &wgpu::Buffer,
+        grads: &wgpu::Buffer,
+    ) {
+        let n = p.count;
+        let npx = (f.width * f.height) as u64;
+        let scratch = storage(ctx, "scratch", 8 * p.channels as u64 * npx);
+        enc.clear_buffer(view_grad, 0, None);
+        let bg = bind(
+            ctx,
+            &self.raster_bwd,
+            &[
+                (0, view_grad),
+                (1, &f.view),
+                (2, &f.proj),
+                (3, &f.order),
+                (4, &f.ranges),
+                (5, &p.rgb),
+                (6, &p.logits),
+                (7, &f.px),
+                (8, g_px),
+                (9, g_logits),
+                (10, &scratch),
+            ],
+        );
+        dispatch(
+            enc,
+            &self.raster_bwd,
+            &bg,
+            (f.width.div_ceil(TILE), f.height.div_ceil(TILE), 1),
+        );
+        let (gx, gy) = ctx.dispatch_2d(n.div_ceil(256));
+        let grid = uniform(ctx, "grid", bytemuck::cast_slice(&[gx * 256, 0u32, 0, 0]));
+        let bg = bind(
+            ctx,
+            &self.project_bwd,
+            &[
+                (0, &f.view),
+                (1, view_grad),
+                (2, &p.rotation),
+                (3, &p.log_scale),
+                (4, grads),
+                (5, &grid),
+            ],
+        );
+        dispatch(enc, &self.project_bwd, &bg, (gx, gy, 1));
+    }
+
+    /// Parameter gradients (same layout as `Params`) and the exposure gradient, from
+    /// per-pixel loss gradients on the host (tests and benchmarks).
     pub async fn backward(
         &self,
         ctx: &GpuContext,
@@ -443,9 +450,8 @@ impl GpuRasterizer {
         let n = p.count as usize;
         let ch = p.channels as usize;
         let stride = VIEW_GRAD + ch;
-        let npx = (f.width * f.height) as u64;
-        let f32s = |v: &[f32]| bytemuck::cast_slice::<f32, u8>(v).to_vec();
-        let packed: Vec<f32> = (0..npx as usize)
+        let npx = (f.width * f.height) as usize;
+        let packed: Vec<f32> = (0..npx)
             .flat_map(|i| {
                 [
                     g.rgb[3 * i],
@@ -456,69 +462,35 @@ impl GpuRasterizer {
                 ]
             })
             .collect();
-        let g_px = init_storage(ctx, "g_px", &f32s(&packed));
-        let g_logits = init_storage(ctx, "g_logits", &f32s(&g.logits));
-        let scratch = storage(ctx, "scratch", 8 * ch as u64 * npx);
+        let g_px = init_storage(ctx, "g_px", bytemuck::cast_slice(&packed));
+        let g_logits = init_storage(ctx, "g_logits", bytemuck::cast_slice(&g.logits));
         let view_grad = storage(ctx, "view_grad", 4 * (stride * n + 2) as u64);
         let out_stride = 13 + ch;
         let grads = storage(ctx, "grads", 4 * (out_stride * n) as u64);
         let mut enc = ctx.device.create_command_encoder(&Default::default());
-        enc.clear_buffer(&view_grad, 0, None);
-        let bg = bind(
-            ctx,
-            &self.raster_bwd,
-            &[
-                (0, &view_grad),
-                (1, &f.view),
-                (2, &f.proj),
-                (3, &f.order),
-                (4, &f.ranges),
-                (5, &p.rgb),
-                (6, &p.logits),
-                (7, &f.px),
-                (8, &g_px),
-                (9, &g_logits),
-                (10, &scratch),
-            ],
-        );
-        dispatch(
-            &mut enc,
-            &self.raster_bwd,
-            &bg,
-            (f.width.div_ceil(TILE), f.height.div_ceil(TILE), 1),
-        );
-        let (gx, gy) = ctx.dispatch_2d((n as u32).div_ceil(256));
-        let grid = uniform(ctx, "grid", bytemuck::cast_slice(&[gx * 256, 0u32, 0, 0]));
-        let bg = bind(
-            ctx,
-            &self.project_bwd,
-            &[
-                (0, &f.view),
-                (1, &view_grad),
-                (2, &p.rotation),
-                (3, &p.log_scale),
-                (4, &grads),
-                (5, &grid),
-            ],
-        );
-        dispatch(&mut enc, &self.project_bwd, &bg, (gx, gy, 1));
+        self.encode_backward(ctx, &mut enc, p, f, &g_px, &g_logits, &view_grad, &grads);
         ctx.queue.submit([enc.finish()]);
         let flat = read_f32(ctx, &grads, out_stride * n).await?;
         let tail = read_bytes(ctx, &view_grad, 4 * (stride * n + 2) as u64).await?;
         let e: Vec<f32> = bytemuck::pod_collect_to_vec(&tail[4 * stride * n..]);
-        let mut out = Params {
-            channels: ch,
-            ..Default::default()
-        };
-        for i in 0..n {
-            let s = &flat[out_stride * i..out_stride * (i + 1)];
-            out.pos.push([s[0], s[1], s[2]]);
-            out.rotation.push([s[3], s[4], s[5], s[6]]);
-            out.log_scale.push([s[7], s[8]]);
-            out.opacity.push(s[9]);
-            out.rgb.push([s[10], s[11], s[12]]);
-            out.logits.extend_from_slice(&s[13..13 + ch]);
-        }
-        Ok((out, [e[0], e[1]]))
+        Ok((unpack_grads(&flat, ch), [e[0], e[1]]))
     }
+}
+
+/// Splits packed per-surfel parameter gradients (`13 + channels` each) into `Params`.
+pub fn unpack_grads(flat: &[f32], ch: usize) -> Params<f32> {
+    let out_stride = 13 + ch;
+    let mut out = Params {
+        channels: ch,
+        ..Default::default()
+    };
+    for s in flat.chunks_exact(out_stride) {
+        out.pos.push([s[0], s[1], s[2]]);
+        out.rotation.push([s[3], s[4], s[5], s[6]]);
+        out.log_scale.push([s[7], s[8]]);
+        out.opacity.push(s[9]);
+        out.rgb.push([s[10], s[11], s[12]]);
+        out.logits.extend_from_slice(&s[13..13 + ch]);
+    }
+    out
 }

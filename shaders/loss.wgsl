@@ -1,0 +1,95 @@
+//! loss (photometric and semantic): per pixel of a rendered view, the masked L1 on RGB
+//! and the cross-entropy of the composited logits against the image's class, and
+//! their gradients with respect to the forward outputs (`g_px`, `g_logits`), which
+//! `rasterize_backward` consumes. One invocation per pixel; each workgroup reduces
+//! its loss sums in workgroup memory and writes one partial pair, so the host reads a
+//! few kilobytes, not an image.
+//!
+//! The target is packed per pixel as r | g << 8 | b << 16 | class << 24 (class = dense
+//! channel index, 255 = outside the loss mask). Pixels the model leaves uncovered
+//! (alpha below `min_alpha`: beyond the corridor or the culling box) are skipped: no
+//! surfel there could learn from them.
+//!
+//! Oracle: src/loss/photometric.rs.
+
+struct LossParams {
+    width: u32,
+    height: u32,
+    channels: u32,
+    row: u32,
+    inv_n: f32,
+    w_rgb: f32,
+    w_ce: f32,
+    min_alpha: f32,
+}
+
+@group(0) @binding(0) var<uniform> lp: LossParams;
+@group(0) @binding(1) var<storage, read> px_out: array<f32>;
+@group(0) @binding(2) var<storage, read> out_logits: array<f32>;
+@group(0) @binding(3) var<storage, read> target_px: array<u32>;
+@group(0) @binding(4) var<storage, read_write> g_px: array<f32>;
+@group(0) @binding(5) var<storage, read_write> g_logits: array<f32>;
+@group(0) @binding(6) var<storage, read_write> partial: array<f32>;
+
+const PIX_STRIDE: u32 = 10u;
+const GRAD_STRIDE: u32 = 5u;
+
+var<workgroup> red: array<vec2<f32>, 256>;
+
+@compute @workgroup_size(256)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+    let i = gid.x + gid.y * lp.row;
+    let ch = lp.channels;
+    var l = vec2<f32>(0.0);
+    if i < lp.width * lp.height {
+        let o = PIX_STRIDE * i;
+        let g = GRAD_STRIDE * i;
+        for (var k = 0u; k < GRAD_STRIDE; k++) {
+            g_px[g + k] = 0.0;
+        }
+        for (var q = 0u; q < ch; q++) {
+            g_logits[i * ch + q] = 0.0;
+        }
+        let t = target_px[i];
+        let cls = t >> 24u;
+        if cls != 255u && px_out[o + 4u] >= lp.min_alpha {
+            let tc = vec3<f32>(f32(t & 255u), f32((t >> 8u) & 255u), f32((t >> 16u) & 255u)) / 255.0;
+            let d = vec3<f32>(px_out[o], px_out[o + 1u], px_out[o + 2u]) - tc;
+            let k_rgb = lp.w_rgb * lp.inv_n / 3.0;
+            l.x = k_rgb * (abs(d.x) + abs(d.y) + abs(d.z));
+            let s = sign(d) * k_rgb;
+            g_px[g] = s.x;
+            g_px[g + 1u] = s.y;
+            g_px[g + 2u] = s.z;
+            // Softmax with the maximum subtracted, so large logits cannot overflow.
+            var mx = out_logits[i * ch];
+            for (var q = 1u; q < ch; q++) {
+                mx = max(mx, out_logits[i * ch + q]);
+            }
+            var z = 0.0;
+            for (var q = 0u; q < ch; q++) {
+                z += exp(out_logits[i * ch + q] - mx);
+            }
+            let lse = mx + log(z);
+            let k_ce = lp.w_ce * lp.inv_n;
+            l.y = k_ce * (lse - out_logits[i * ch + cls]);
+            for (var q = 0u; q < ch; q++) {
+                let p = exp(out_logits[i * ch + q] - lse);
+                g_logits[i * ch + q] = k_ce * (p - select(0.0, 1.0, q == cls));
+            }
+        }
+    }
+    red[li] = l;
+    workgroupBarrier();
+    for (var off = 128u; off > 0u; off = off / 2u) {
+        if li < off {
+            red[li] += red[li + off];
+        }
+        workgroupBarrier();
+    }
+    if li == 0u {
+        let w = wg.x + wg.y * (lp.row / 256u);
+        partial[2u * w] = red[0].x;
+        partial[2u * w + 1u] = red[0].y;
+    }
+}

@@ -1,0 +1,74 @@
+//! regularise: the per-surfel terms of the loss, added to the z gradient that
+//! `project_backward` wrote (slot 2 of `13 + channels` per surfel):
+//!   L_smooth = w_s Σ_{edges ij} (z_i − z_j)²        (grid neighbours, CSR)
+//!   L_traj   = w_t Σ_i q_i ρ(z_i − ẑ_i)             (ρ: Huber with width δ)
+//!   L_z      = w_z Σ_{i with LiDAR} (z_i − z_lidar,i)²
+//! (sums over surfels, see `RegData::weights` for why not means)
+//! The edge list is symmetric (both directions stored), so each invocation owns its
+//! surfel's gradient and needs no atomics. The LiDAR elevation per surfel comes from a
+//! lookup built once on the host, not a search per step. Each workgroup reduces the
+//! three loss sums and writes one partial triple.
+//!
+//! Oracle: src/loss/regularise.rs.
+
+struct RegParams {
+    count: u32,
+    row: u32,
+    stride: u32,
+    pad: u32,
+    w_smooth: f32,
+    w_traj: f32,
+    huber: f32,
+    w_lidar: f32,
+}
+
+@group(0) @binding(0) var<uniform> rp: RegParams;
+@group(0) @binding(1) var<storage, read> pos: array<f32>;
+@group(0) @binding(2) var<storage, read> adj_start: array<u32>;
+@group(0) @binding(3) var<storage, read> adj: array<u32>;
+// Per surfel: ẑ, q, LiDAR z, LiDAR weight (0 or 1).
+@group(0) @binding(4) var<storage, read> priors: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read_write> grads: array<f32>;
+@group(0) @binding(6) var<storage, read_write> partial: array<f32>;
+
+var<workgroup> red: array<vec3<f32>, 256>;
+
+@compute @workgroup_size(256)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+    let i = gid.x + gid.y * rp.row;
+    var l = vec3<f32>(0.0);
+    if i < rp.count {
+        let z = pos[3u * i + 2u];
+        var g = 0.0;
+        for (var k = adj_start[i]; k < adj_start[i + 1u]; k++) {
+            let d = z - pos[3u * adj[k] + 2u];
+            // Each edge is stored twice: half its loss here, half at the other end.
+            l.x += 0.5 * rp.w_smooth * d * d;
+            g += 2.0 * rp.w_smooth * d;
+        }
+        let pr = priors[i];
+        let r = z - pr.x;
+        let a = abs(r);
+        let rho = select(rp.huber * (a - 0.5 * rp.huber), 0.5 * r * r, a <= rp.huber);
+        l.y = rp.w_traj * pr.y * rho;
+        g += rp.w_traj * pr.y * clamp(r, -rp.huber, rp.huber);
+        let e = z - pr.z;
+        l.z = rp.w_lidar * pr.w * e * e;
+        g += 2.0 * rp.w_lidar * pr.w * e;
+        grads[rp.stride * i + 2u] += g;
+    }
+    red[li] = l;
+    workgroupBarrier();
+    for (var off = 128u; off > 0u; off = off / 2u) {
+        if li < off {
+            red[li] += red[li + off];
+        }
+        workgroupBarrier();
+    }
+    if li == 0u {
+        let w = wg.x + wg.y * (rp.row / 256u);
+        partial[3u * w] = red[0].x;
+        partial[3u * w + 1u] = red[0].y;
+        partial[3u * w + 2u] = red[0].z;
+    }
+}

@@ -1,0 +1,205 @@
+//! Stage 7: the bird's-eye-view map, rendered through the same rasteriser kernels as
+//! the camera views, in square chunks that are stitched into one raster.
+//!
+//! Each chunk is seen by a pinhole camera looking straight down from `HEIGHT_M` above
+//! the chunk's mean surfel elevation, with a focal length that makes one pixel one
+//! BEV cell at that distance: orthographic up to parallax. A surfel δz from the mean,
+//! r from the chunk centre, moves by r·δz/H: at most 9 mm for δz = 1 m in a 256-pixel
+//! chunk of 5 cm cells, a fifth of a cell. The view's depth gives the elevation.
+
+use crate::eval::BevRaster;
+use crate::gpu::{GpuContext, GpuError};
+use crate::render::gpu::{GpuParams, GpuRasterizer};
+use crate::render::{CullConfig, Params, ViewCamera};
+
+/// Height of the BEV cameras above the surface, metres.
+pub const HEIGHT_M: f64 = 1000.0;
+/// Chunk side, pixels.
+pub const CHUNK: u32 = 256;
+
+/// Where the BEV raster lies: west x and north y of its edges (world), metres per
+/// pixel, size. Row 0 is the north edge.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct BevGeometry {
+    pub origin: [f64; 2],
+    pub resolution: f64,
+    pub width: u32,
+    pub height: u32,
+}
+
+impl BevGeometry {
+    /// The bounding box of world points `xy`, padded by `pad` metres.
+    pub fn around(xy: impl Iterator<Item = [f64; 2]>, resolution: f64, pad: f64) -> Self {
+        let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+        for p in xy {
+            for k in 0..2 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        if lo[0] > hi[0] {
+            (lo, hi) = ([0.0; 2], [0.0; 2]);
+        }
+        let w = ((hi[0] - lo[0] + 2.0 * pad) / resolution).ceil().max(1.0) as u32;
+        let h = ((hi[1] - lo[1] + 2.0 * pad) / resolution).ceil().max(1.0) as u32;
+        Self {
+            origin: [lo[0] - pad, hi[1] + pad],
+            resolution,
+            width: w,
+            height: h,
+        }
+    }
+
+    pub fn of_raster(r: &BevRaster) -> Self {
+        Self {
+            origin: r.origin,
+            resolution: r.resolution,
+            width: r.width,
+            height: r.height,
+        }
+    }
+}
+
+/// The stitched BEV image: per pixel colour 3 (normalised by alpha), logits
+/// (`channels`, normalised by alpha), elevation (world) and alpha.
+#[derive(Clone, Debug, Default)]
+pub struct BevImage {
+    pub width: u32,
+    pub height: u32,
+    pub channels: usize,
+    pub rgb: Vec<f32>,
+    pub logits: Vec<f32>,
+    pub elevation: Vec<f32>,
+    pub alpha: Vec<f32>,
+}
+
+/// The downward camera of the chunk whose top-left pixel is (c0, r0), for a model in
+/// the local frame (world − `origin`), hovering over elevation `z_mean` (local).
+fn chunk_camera(g: &BevGeometry, origin: [f64; 3], c0: u32, r0: u32, z_mean: f64) -> ViewCamera {
+    let half = CHUNK as f64 / 2.0;
+    let xc = g.origin[0] + (c0 as f64 + half) * g.resolution - origin[0];
+    let yc = g.origin[1] - (r0 as f64 + half) * g.resolution - origin[1];
+    let zc = z_mean + HEIGHT_M;
+    // Camera x = world x, camera y = −world y (north up), camera z = −world z.
+    let f = (HEIGHT_M / g.resolution) as f32;
+    ViewCamera {
+        world_to_cam: [
+            [1.0, 0.0, 0.0, -xc as f32],
+            [0.0, -1.0, 0.0, yc as f32],
+            [0.0, 0.0, -1.0, zc as f32],
+        ],
+        fx: f,
+        fy: f,
+        cx: half as f32,
+        cy: half as f32,
+        width: CHUNK,
+        height: CHUNK,
+        exposure: [0.0, 0.0],
+    }
+}
+
+/// Renders the BEV of the GPU model `gp` (whose host copy `p` gives the surfel
+/// positions, local frame) over geometry `g`, chunk by chunk. `progress(done, total)`
+/// is called after each chunk.
+pub async fn render(
+    ctx: &GpuContext,
+    raster: &GpuRasterizer,
+    gp: &GpuParams,
+    p: &Params<f32>,
+    g: &BevGeometry,
+    origin: [f64; 3],
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<BevImage, GpuError> {
+    let ch = p.channels;
+    let npx = (g.width * g.height) as usize;
+    let mut out = BevImage {
+        width: g.width,
+        height: g.height,
+        channels: ch,
+        rgb: vec![0.0; 3 * npx],
+        logits: vec![0.0; ch * npx],
+        elevation: vec![f32::NAN; npx],
+        alpha: vec![0.0; npx],
+    };
+    // Mean elevation of the surfels in each chunk (chunks without any are skipped).
+    let (cw, chh) = (g.width.div_ceil(CHUNK), g.height.div_ceil(CHUNK));
+    let mut sums = vec![(0.0f64, 0usize); (cw * chh) as usize];
+    for q in &p.pos {
+        let col = ((q[0] as f64 + origin[0] - g.origin[0]) / g.resolution).floor();
+        let row = ((g.origin[1] - q[1] as f64 - origin[1]) / g.resolution).floor();
+        if col < 0.0 || row < 0.0 || col >= g.width as f64 || row >= g.height as f64 {
+            continue;
+        }
+        let k = (row as u32 / CHUNK * cw + col as u32 / CHUNK) as usize;
+        sums[k].0 += q[2] as f64;
+        sums[k].1 += 1;
+    }
+    let cull = CullConfig {
+        near: (HEIGHT_M - 200.0) as f32,
+        far: (HEIGHT_M + 200.0) as f32,
+        half_width: 1e6,
+    };
+    let total = sums.iter().filter(|s| s.1 > 0).count();
+    let mut done = 0;
+    for (k, &(sum, count)) in sums.iter().enumerate() {
+        if count == 0 {
+            continue;
+        }
+        let (c0, r0) = ((k as u32 % cw) * CHUNK, (k as u32 / cw) * CHUNK);
+        let z_mean = sum / count as f64;
+        let cam = chunk_camera(g, origin, c0, r0, z_mean);
+        let f = raster.forward(ctx, gp, &cam, &cull).await?;
+        let img = GpuRasterizer::read_image(ctx, &f).await?;
+        let zc = z_mean + HEIGHT_M;
+        for y in 0..CHUNK.min(g.height - r0) {
+            for x in 0..CHUNK.min(g.width - c0) {
+                let s = (y * CHUNK + x) as usize;
+                let d = ((r0 + y) * g.width + c0 + x) as usize;
+                let a = img.alpha[s];
+                out.alpha[d] = a;
+                if a <= 1e-3 {
+                    continue;
+                }
+                for c in 0..3 {
+                    out.rgb[3 * d + c] = img.rgb[3 * s + c] / a;
+                }
+                for c in 0..ch {
+                    out.logits[ch * d + c] = img.logits[ch * s + c] / a;
+                }
+                out.elevation[d] = (origin[2] + zc - (img.depth[s] / a) as f64) as f32;
+            }
+        }
+        done += 1;
+        progress(done, total);
+    }
+    Ok(out)
+}
+
+/// The BEV raster of an image: pixels with alpha ≥ `min_alpha` are valid; the class is
+/// the most likely among `road_channels` (dense channel → class id).
+pub fn to_raster(
+    img: &BevImage,
+    g: &BevGeometry,
+    road_channels: &[(usize, u8)],
+    min_alpha: f32,
+) -> BevRaster {
+    let mut r = BevRaster::empty(g.origin, g.resolution, g.width, g.height);
+    let ch = img.channels;
+    for i in 0..(g.width * g.height) as usize {
+        let (x, y) = (i as u32 % g.width, i as u32 / g.width);
+        if img.alpha[i] < min_alpha {
+            continue;
+        }
+        let px = [0, 1, 2].map(|c| (img.rgb[3 * i + c].clamp(0.0, 1.0) * 255.0).round() as u8);
+        r.rgb.put_pixel(x, y, image::Rgb(px));
+        let best = road_channels
+            .iter()
+            .max_by(|a, b| img.logits[ch * i + a.0].total_cmp(&img.logits[ch * i + b.0]));
+        if let Some(&(_, id)) = best {
+            r.class_ids.put_pixel(x, y, image::Luma([id]));
+        }
+        r.elevation[i] = img.elevation[i];
+        r.valid.put_pixel(x, y, image::Luma([255]));
+    }
+    r
+}

@@ -1,0 +1,111 @@
+//! Colour maps and a tiny bitmap font for legends.
+
+/// Turbo-like colour map (blue → cyan → green → yellow → red) for t in 0..1, as a
+/// piecewise-linear ramp through fixed stops (a readable, colour-blind-safer scale
+/// than a rainbow, and simple enough to reproduce in the page).
+pub fn ramp(t: f32) -> [u8; 3] {
+    const STOPS: [[f32; 3]; 6] = [
+        [48.0, 18.0, 59.0],
+        [70.0, 134.0, 251.0],
+        [27.0, 229.0, 181.0],
+        [164.0, 252.0, 60.0],
+        [251.0, 185.0, 56.0],
+        [122.0, 4.0, 3.0],
+    ];
+    let t = if t.is_finite() {
+        t.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let x = t * (STOPS.len() - 1) as f32;
+    let i = (x.floor() as usize).min(STOPS.len() - 2);
+    let f = x - i as f32;
+    [0, 1, 2].map(|c| (STOPS[i][c] * (1.0 - f) + STOPS[i + 1][c] * f).round() as u8)
+}
+
+/// 3×5 glyphs for digits, '.', '-', ' ', 'm' and 'c' (rows top to bottom, 3 bits each).
+fn glyph(c: char) -> [u8; 5] {
+    match c {
+        '0' => [7, 5, 5, 5, 7],
+        '1' => [2, 6, 2, 2, 7],
+        '2' => [7, 1, 7, 4, 7],
+        '3' => [7, 1, 7, 1, 7],
+        '4' => [5, 5, 7, 1, 1],
+        '5' => [7, 4, 7, 1, 7],
+        '6' => [7, 4, 7, 5, 7],
+        '7' => [7, 1, 1, 1, 1],
+        '8' => [7, 5, 7, 5, 7],
+        '9' => [7, 5, 7, 1, 7],
+        '.' => [0, 0, 0, 0, 2],
+        '-' => [0, 0, 7, 0, 0],
+        'm' => [0, 0, 7, 7, 5],
+        'c' => [0, 0, 7, 4, 7],
+        _ => [0; 5],
+    }
+}
+
+/// Draws `text` at (x, y) with `scale`-pixel dots into an RGB image.
+pub fn draw_text(img: &mut image::RgbImage, x: u32, y: u32, text: &str, scale: u32, c: [u8; 3]) {
+    for (k, ch) in text.chars().enumerate() {
+        let g = glyph(ch);
+        for (row, bits) in g.iter().enumerate() {
+            for col in 0..3 {
+                if bits & (4 >> col) == 0 {
+                    continue;
+                }
+                for dy in 0..scale {
+                    for dx in 0..scale {
+                        let px = x + (k as u32 * 4 + col) * scale + dx;
+                        let py = y + row as u32 * scale + dy;
+                        if px < img.width() && py < img.height() {
+                            img.put_pixel(px, py, image::Rgb(c));
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// A float layer as a colour-mapped image between `lo` and `hi`, with a legend strip
+/// below it (the ramp, and the two end values in `unit` at each end). NaN is black.
+pub fn mapped_with_legend(
+    v: &[f32],
+    w: u32,
+    h: u32,
+    lo: f32,
+    hi: f32,
+    label: &dyn Fn(f32) -> String,
+) -> image::RgbImage {
+    let scale = (w / 200).clamp(1, 4);
+    let strip = 12 * scale;
+    let mut img = image::RgbImage::new(w, h + strip);
+    let span = (hi - lo).max(1e-6);
+    for (i, &z) in v.iter().enumerate() {
+        let c = if z.is_finite() {
+            ramp((z - lo) / span)
+        } else {
+            [0, 0, 0]
+        };
+        img.put_pixel(i as u32 % w, i as u32 / w, image::Rgb(c));
+    }
+    for x in 0..w {
+        let c = ramp(x as f32 / (w.max(2) - 1) as f32);
+        for y in h..h + 4 * scale {
+            img.put_pixel(x, y, image::Rgb(c));
+        }
+    }
+    let white = [255, 255, 255];
+    draw_text(&mut img, 1, h + 5 * scale, &label(lo), scale, white);
+    let right = label(hi);
+    let tw = right.chars().count() as u32 * 4 * scale;
+    draw_text(
+        &mut img,
+        w.saturating_sub(tw + 1),
+        h + 5 * scale,
+        &right,
+        scale,
+        white,
+    );
+    img
+}

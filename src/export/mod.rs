@@ -1,0 +1,168 @@
+//! Stage 8: export. Every file of a finished run as (name, bytes), so that the CLI
+//! writes them to a folder and the page offers them as downloads, identically.
+
+pub mod colour;
+pub mod ply;
+
+use crate::bev::BevGeometry;
+use crate::bundle::Manifest;
+use crate::reconstruct::Outcome;
+use colour::mapped_with_legend;
+use image::{GrayImage, RgbImage};
+
+fn png(img: &image::DynamicImage) -> Vec<u8> {
+    let mut out = std::io::Cursor::new(Vec::new());
+    // Encoding an in-memory image into a Vec cannot fail for RGB8/L8.
+    let _ = img.write_to(&mut out, image::ImageFormat::Png);
+    out.into_inner()
+}
+
+/// A float32 array as NumPy `.npy` (version 1.0, little endian, C order).
+pub fn npy(v: &[f32], width: u32, height: u32) -> Vec<u8> {
+    let mut head =
+        format!("{{'descr': '<f4', 'fortran_order': False, 'shape': ({height}, {width}), }}");
+    // Magic (6) + version (2) + length (2) + header, padded with spaces to 64 bytes.
+    while (10 + head.len() + 1) % 64 != 0 {
+        head.push(' ');
+    }
+    head.push('\n');
+    let mut out = b"\x93NUMPY\x01\x00".to_vec();
+    out.extend_from_slice(&(head.len() as u16).to_le_bytes());
+    out.extend_from_slice(head.as_bytes());
+    for x in v {
+        out.extend_from_slice(&x.to_le_bytes());
+    }
+    out
+}
+
+/// Finite minimum and maximum (0, 1 when there is none).
+fn range(v: &[f32]) -> (f32, f32) {
+    let (lo, hi) = v
+        .iter()
+        .filter(|x| x.is_finite())
+        .fold((f32::MAX, f32::MIN), |(a, b), &x| (a.min(x), b.max(x)));
+    if lo > hi {
+        (0.0, 1.0)
+    } else {
+        (lo, hi)
+    }
+}
+
+/// The semantic layer coloured with the manifest's class colours.
+pub fn semantic_colours(m: &Manifest, ids: &GrayImage, valid: &GrayImage) -> RgbImage {
+    let mut lut = [[0u8; 3]; 256];
+    for c in &m.semantic_classes {
+        lut[c.id as usize] = c.color;
+    }
+    RgbImage::from_fn(ids.width(), ids.height(), |x, y| {
+        if valid.get_pixel(x, y).0[0] == 0 {
+            image::Rgb([0, 0, 0])
+        } else {
+            image::Rgb(lut[ids.get_pixel(x, y).0[0] as usize])
+        }
+    })
+}
+
+/// A 0..1 scalar layer as greyscale (NaN black).
+fn grey(v: &[f32], w: u32, h: u32) -> GrayImage {
+    GrayImage::from_fn(w, h, |x, y| {
+        let s = v[(y * w + x) as usize];
+        image::Luma([if s.is_finite() {
+            (s.clamp(0.0, 1.0) * 255.0).round() as u8
+        } else {
+            0
+        }])
+    })
+}
+
+/// The elevation layer (world metres, NaN where invalid).
+pub fn elevation(o: &Outcome) -> Vec<f32> {
+    o.raster
+        .elevation
+        .iter()
+        .zip(o.raster.valid.pixels())
+        .map(|(&z, v)| if v.0[0] != 0 { z } else { f32::NAN })
+        .collect()
+}
+
+/// |elevation − truth| where both are valid, metres.
+pub fn elevation_error(o: &Outcome) -> Option<Vec<f32>> {
+    let t = o.truth.as_ref()?;
+    let g = &o.geometry;
+    let z = elevation(o);
+    Some(
+        (0..(g.width * g.height))
+            .map(|i| {
+                let (x, y) = (i % g.width, i / g.width);
+                let (wx, wy) = (
+                    g.origin[0] + (x as f64 + 0.5) * g.resolution,
+                    g.origin[1] - (y as f64 + 0.5) * g.resolution,
+                );
+                match t.pixel_of(wx, wy) {
+                    Some((c, r)) if t.is_valid(c, r) => {
+                        (z[i as usize] - t.elevation_at(c, r)).abs()
+                    }
+                    _ => f32::NAN,
+                }
+            })
+            .collect(),
+    )
+}
+
+/// Every output file of a run except the report.
+pub fn files(o: &Outcome, m: &Manifest, origin: [f64; 3]) -> Vec<(String, Vec<u8>)> {
+    let g: &BevGeometry = &o.geometry;
+    let (w, h) = (g.width, g.height);
+    let r = &o.raster;
+    let mut out = vec![
+        ("rgb.png".into(), png(&r.rgb.clone().into())),
+        (
+            "semantic.png".into(),
+            png(&semantic_colours(m, &r.class_ids, &r.valid).into()),
+        ),
+        ("semantic_ids.png".into(), png(&r.class_ids.clone().into())),
+        ("valid.png".into(), png(&r.valid.clone().into())),
+    ];
+    let z = elevation(o);
+    let (lo, hi) = range(&z);
+    out.push((
+        "elevation.png".into(),
+        png(&mapped_with_legend(&z, w, h, lo, hi, &|v| format!("{v:.2}m")).into()),
+    ));
+    out.push(("elevation.npy".into(), npy(&z, w, h)));
+    out.push((
+        "elevation.f32".into(),
+        z.iter().flat_map(|v| v.to_le_bytes()).collect(),
+    ));
+    let geo = serde_json::json!({
+        "origin": g.origin, "resolution": g.resolution, "width": w, "height": h,
+        "note": "origin is the world x of the west edge and y of the north edge; row 0 is north; \
+                 elevation.npy/.f32 hold world z in metres, NaN where the map is empty",
+        "elevation_min_m": lo, "elevation_max_m": hi,
+    });
+    out.push((
+        "bev.json".into(),
+        serde_json::to_vec_pretty(&geo).unwrap_or_default(),
+    ));
+    out.push((
+        "confidence.png".into(),
+        png(&grey(&o.confidence, w, h).into()),
+    ));
+    out.push(("density.png".into(), png(&grey(&o.density, w, h).into())));
+    if let Some(e) = elevation_error(o) {
+        out.push((
+            "error.png".into(),
+            png(&mapped_with_legend(&e, w, h, 0.0, 0.1, &|v| format!("{:.0}cm", v * 100.0)).into()),
+        ));
+    }
+    let centres: Vec<u8> = o
+        .params
+        .pos
+        .iter()
+        .flat_map(|p| [0, 1, 2].map(|k| ((p[k] as f64 + origin[k]) as f32).to_le_bytes()))
+        .flatten()
+        .collect();
+    out.push(("surfel_centres.f32".into(), centres));
+    out.push(("surfels.ply".into(), ply::surfels_ply(&o.params, origin)));
+    out
+}

@@ -1,0 +1,101 @@
+//! Small helpers shared by the host glue of every kernel: buffers, bind groups,
+//! pipelines and dispatches. Bindings are given by number because auto layouts hold
+//! only the bindings an entry point uses.
+
+use super::GpuContext;
+use wgpu::util::DeviceExt;
+
+const STORAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
+    .union(wgpu::BufferUsages::COPY_SRC)
+    .union(wgpu::BufferUsages::COPY_DST);
+
+/// A zeroed storage buffer (at least 16 bytes: empty bindings are invalid).
+pub fn storage(ctx: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
+    ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: bytes.max(16).next_multiple_of(4),
+        usage: STORAGE,
+        mapped_at_creation: false,
+    })
+}
+
+/// A storage buffer holding `data`.
+pub fn init_storage(ctx: &GpuContext, label: &str, data: &[u8]) -> wgpu::Buffer {
+    let mut bytes = data.to_vec();
+    bytes.resize(bytes.len().max(16).next_multiple_of(4), 0);
+    ctx.device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: &bytes,
+            usage: STORAGE,
+        })
+}
+
+/// A uniform buffer holding `data` (writable later with `queue.write_buffer`).
+pub fn uniform(ctx: &GpuContext, label: &str, data: &[u8]) -> wgpu::Buffer {
+    let mut bytes = data.to_vec();
+    bytes.resize(bytes.len().max(16).next_multiple_of(16), 0);
+    ctx.device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: &bytes,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        })
+}
+
+/// A compute pipeline with an automatic layout from WGSL `parts`.
+pub fn pipeline(
+    ctx: &GpuContext,
+    label: &str,
+    parts: &[&str],
+    entry: &str,
+) -> wgpu::ComputePipeline {
+    let module = ctx.shader(label, parts);
+    ctx.device
+        .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(label),
+            layout: None,
+            module: &module,
+            entry_point: Some(entry),
+            compilation_options: Default::default(),
+            cache: None,
+        })
+}
+
+/// A bind group for group 0 of `p` from (binding, buffer) pairs.
+pub fn bind(
+    ctx: &GpuContext,
+    p: &wgpu::ComputePipeline,
+    entries: &[(u32, &wgpu::Buffer)],
+) -> wgpu::BindGroup {
+    let entries: Vec<wgpu::BindGroupEntry> = entries
+        .iter()
+        .map(|(b, buf)| wgpu::BindGroupEntry {
+            binding: *b,
+            resource: buf.as_entire_binding(),
+        })
+        .collect();
+    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: None,
+        layout: &p.get_bind_group_layout(0),
+        entries: &entries,
+    })
+}
+
+/// Records one compute pass with one dispatch.
+pub fn dispatch(
+    enc: &mut wgpu::CommandEncoder,
+    p: &wgpu::ComputePipeline,
+    bg: &wgpu::BindGroup,
+    groups: (u32, u32, u32),
+) {
+    let mut pass = enc.begin_compute_pass(&Default::default());
+    pass.set_pipeline(p);
+    pass.set_bind_group(0, bg, &[]);
+    pass.dispatch_workgroups(groups.0, groups.1, groups.2);
+}
+
+/// Raw bytes of a slice of plain values.
+pub fn bytes_of<T: bytemuck::Pod>(v: &[T]) -> &[u8] {
+    bytemuck::cast_slice(v)
+}

@@ -1,0 +1,176 @@
+//! One optimisation step on the GPU against the CPU oracles, shared by the native and
+//! the browser tests: the loss, regulariser and rasteriser gradients against
+//! `loss::photometric` + the rasteriser oracle + `loss::regularise`, then the Adam
+//! kernel against `optim::adam` applied to the GPU's own gradients (Adam's
+//! normalisation turns a 1e-7 gradient difference into a full step, so the update is
+//! checked from identical gradients), over two steps so that the moments matter.
+
+use super::adam::{step, step_exposure, StepConstants};
+use super::train::Trainer;
+use super::TrainConfig;
+use crate::gpu::{GpuContext, GpuError};
+use crate::loss::photometric::photometric;
+use crate::loss::regularise::{regularise, RegData};
+use crate::render::check::test_scene;
+use crate::render::rasterize::render;
+use crate::render::{project_backward, rasterize_backward, Params};
+use crate::synth::rng::Rng;
+
+#[derive(Debug, Default)]
+pub struct StepDifferences {
+    /// Loss terms, relative: (GPU, CPU) per term.
+    pub losses: Vec<(&'static str, f64, f64)>,
+    /// Gradients of step 1, relative to each group's largest magnitude.
+    pub grads: Vec<(&'static str, f32)>,
+    /// Parameters after steps 1 and 2 against the CPU Adam, max abs difference.
+    pub params: [f32; 2],
+    /// Exposure after step 2 against the CPU Adam.
+    pub exposure: f32,
+    /// Largest parameter change of step 1 (so that a no-op step cannot pass).
+    pub moved: f32,
+}
+
+fn flat(p: &Params<f32>) -> Vec<f32> {
+    let mut v: Vec<f32> = p.pos.iter().flatten().copied().collect();
+    v.extend(p.rotation.iter().flatten());
+    v.extend(p.log_scale.iter().flatten());
+    v.extend(&p.opacity);
+    v.extend(p.rgb.iter().flatten());
+    v.extend(&p.logits);
+    v
+}
+
+fn max_abs(a: &[f32], b: &[f32]) -> f32 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max)
+}
+
+fn rel(a: &[f32], b: &[f32]) -> f32 {
+    max_abs(a, b) / b.iter().fold(0.0f32, |m, v| m.max(v.abs())).max(1e-12)
+}
+
+/// A chain of neighbours along the surfel list and random priors, so that every
+/// regulariser term is active.
+fn reg_data(n: usize, z: &[f32], rng: &mut Rng) -> RegData {
+    let mut adj_start = vec![0u32];
+    let mut adj = Vec::new();
+    for i in 0..n {
+        if i > 0 {
+            adj.push(i as u32 - 1);
+        }
+        if i + 1 < n {
+            adj.push(i as u32 + 1);
+        }
+        adj_start.push(adj.len() as u32);
+    }
+    let priors = (0..n)
+        .map(|i| {
+            let dz = 0.1 * rng.normal() as f32;
+            let has = (i % 3 != 0) as u8 as f32;
+            [z[i] + dz, rng.uniform() as f32, z[i] - 0.5 * dz, has]
+        })
+        .collect();
+    RegData {
+        edges: adj.len() / 2,
+        adj_start,
+        adj,
+        priors,
+        with_lidar: 2 * n / 3,
+    }
+}
+
+pub async fn compare_step(ctx: GpuContext) -> Result<StepDifferences, GpuError> {
+    let ch = 4;
+    let (p0, mut cam) = test_scene(ch);
+    // The trainer's exposures start at zero on the GPU.
+    cam.exposure = [0.0, 0.0];
+    let n = p0.len();
+    let mut rng = Rng::new(11);
+    let z: Vec<f32> = p0.pos.iter().map(|q| q[2]).collect();
+    let reg = reg_data(n, &z, &mut rng);
+    let mut cfg = TrainConfig::default();
+    cfg.loss.min_alpha = 0.2;
+    let npx = (cam.width * cam.height) as usize;
+    // Random colours; a tenth of the pixels masked out.
+    let target: Vec<u32> = (0..npx)
+        .map(|_| {
+            let c = (rng.next_u64() & 0xff_ffff) as u32;
+            let cls = if rng.uniform() < 0.1 {
+                255
+            } else {
+                (rng.next_u64() % ch as u64) as u32
+            };
+            c | cls << 24
+        })
+        .collect();
+    let mask = target.iter().filter(|t| *t >> 24 != 255).count();
+    let extent = 10.0;
+    let mut t = Trainer::new(ctx, &p0, &reg, 1, &cfg, extent, 4).await?;
+    let cull = cfg.cull;
+    let mut out = StepDifferences::default();
+    // CPU chain of step 1.
+    let f = render(&p0, &cam, &cull);
+    let (l, og) = photometric(&f.image, &target, &cfg.loss, 1.0 / mask as f32);
+    let (vg, exp_g) = rasterize_backward::backward(&p0, &cam, &f, &og);
+    let mut g = project_backward::backward(&p0, &cam, &vg);
+    let w = reg.weights(&cfg.loss, true);
+    let (rl, rz) = regularise(&reg, &w, &z);
+    for (gp, dz) in g.pos.iter_mut().zip(&rz) {
+        gp[2] += dz;
+    }
+    let gl = t
+        .step(&cam, 0, &target, mask)
+        .await
+        .map_err(|e| GpuError::Validation(e.to_string()))?;
+    out.losses = vec![
+        ("rgb", gl.rgb, l.rgb),
+        ("ce", gl.ce, l.ce),
+        ("smooth", gl.smooth, rl[0]),
+        ("traj", gl.traj, rl[1]),
+        ("lidar", gl.lidar, rl[2]),
+    ];
+    let (g1, e1) = t.read_grads().await?;
+    let zs = |p: &Params<f32>| p.pos.iter().map(|q| q[2]).collect::<Vec<f32>>();
+    let f3 = |v: &[[f32; 3]]| v.iter().flatten().copied().collect::<Vec<f32>>();
+    out.grads = vec![
+        ("z", rel(&zs(&g1), &zs(&g))),
+        ("rgb", rel(&f3(&g1.rgb), &f3(&g.rgb))),
+        ("opacity", rel(&g1.opacity, &g.opacity)),
+        ("logits", rel(&g1.logits, &g.logits)),
+        (
+            "rotation",
+            rel(
+                &g1.rotation.iter().flatten().copied().collect::<Vec<_>>(),
+                &g.rotation.iter().flatten().copied().collect::<Vec<_>>(),
+            ),
+        ),
+        ("exposure", rel(&e1, &exp_g)),
+    ];
+    // Adam from the GPU's gradients, two steps.
+    let lr = &cfg.lr;
+    let mut moments = vec![0.0f32; 2 * (13 + ch) * n];
+    let mut em = [0.0f32; 4];
+    let mut exposure = [0.0f32; 2];
+    let mut cpu = p0.clone();
+    let c1 = StepConstants::new(lr, lr.z_at(0, 4, extent), 1);
+    step(&mut cpu, &g1, &mut moments, &c1);
+    step_exposure(&mut exposure, e1, &mut em, &c1);
+    let p1 = t.read_params().await?;
+    out.params[0] = max_abs(&flat(&p1), &flat(&cpu));
+    out.moved = max_abs(&flat(&p1), &flat(&p0));
+    // The trainer takes the exposure from its GPU buffer, not from `cam`.
+    t.step(&cam, 0, &target, mask)
+        .await
+        .map_err(|e| GpuError::Validation(e.to_string()))?;
+    let (g2, e2) = t.read_grads().await?;
+    let c2 = StepConstants::new(lr, lr.z_at(1, 4, extent), 2);
+    step(&mut cpu, &g2, &mut moments, &c2);
+    step_exposure(&mut exposure, e2, &mut em, &c2);
+    let p2 = t.read_params().await?;
+    out.params[1] = max_abs(&flat(&p2), &flat(&cpu));
+    let e = t.read_exposures().await?;
+    out.exposure = max_abs(&e[0], &exposure);
+    Ok(out)
+}

@@ -1,0 +1,467 @@
+//! The whole job, bundle to map, as a session that the CLI and the page drive step by
+//! step (so that the page can yield between steps and show progress):
+//! prepare (grid, initialisation, refinement) → colours from the best training view
+//! (the IPM baseline model) → optimisation steps → BEV layers, metrics, held-out views.
+//! Nothing here is native-only: the same code runs in wasm.
+
+use crate::bev::{self, BevGeometry, BevImage};
+use crate::bundle::{Bundle, ClassRole, Problem};
+use crate::eval::{BevRaster, Metrics};
+use crate::gpu::{GpuContext, GpuError};
+use crate::init::prepare::{lidar_world, prepare, PrepareConfig, PrepareError, PrepareReport};
+use crate::init::{PoseIndex, PosePlanes};
+use crate::loss::regularise::RegData;
+use crate::loss::targets;
+use crate::optim::train::{read_params, StepLoss, TrainError, Trainer};
+use crate::optim::{epoch_order, is_holdout, scene_extent, split_views, TrainConfig, ViewRef};
+use crate::render::from_bundle::{local_origin, params, view_camera};
+use crate::render::gpu::GpuRasterizer;
+use crate::render::Params;
+use serde::Serialize;
+use thiserror::Error;
+use web_time::Instant;
+
+/// Opacity logit of surfels no training view sees (opacity 4.5e-5: below the
+/// rasteriser's 1/255 alpha floor, so they are skipped and receive no gradient).
+pub const UNSEEN_OPACITY_LOGIT: f32 = -10.0;
+
+#[derive(Debug, Error)]
+pub enum ReconstructError {
+    #[error(transparent)]
+    Prepare(#[from] PrepareError),
+    #[error(transparent)]
+    Bundle(#[from] Problem),
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    #[error(transparent)]
+    Train(#[from] TrainError),
+    #[error(
+        "the bundle has no training views (every frame is held out or no view names a camera)"
+    )]
+    NoViews,
+}
+
+#[derive(Clone, Debug, Default)]
+pub struct ReconstructConfig {
+    pub prepare: PrepareConfig,
+    pub train: TrainConfig,
+    /// Skip optimisation: the map is the IPM baseline (best-view colours on the
+    /// initial surface).
+    pub baseline_ipm: bool,
+}
+
+/// Wall time of each stage, milliseconds.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Timings {
+    pub prepare_ms: f64,
+    pub colour_ms: f64,
+    pub gpu_setup_ms: f64,
+    pub train_ms: f64,
+    pub bev_ms: f64,
+    pub eval_ms: f64,
+}
+
+/// Held-out evaluation: road-pixel PSNR of the held-out camera views.
+#[derive(Clone, Debug, Serialize)]
+pub struct Holdout {
+    pub psnr_db: f64,
+    pub ipm_psnr_db: f64,
+    pub frames: usize,
+    pub views: usize,
+}
+
+pub struct Session {
+    pub cfg: ReconstructConfig,
+    pub prepare_report: PrepareReport,
+    pub grid: crate::grid::Grid,
+    pub z_hat: Vec<f32>,
+    pub q: Vec<f32>,
+    /// Refinement level per surfel (0 base, 1 added).
+    pub level: Vec<u8>,
+    pub origin: [f64; 3],
+    /// The model before optimisation (the IPM baseline).
+    pub initial: Params<f32>,
+    pub trainer: Trainer,
+    pub train_views: Vec<ViewRef>,
+    pub holdout_views: Vec<ViewRef>,
+    order: Vec<usize>,
+    pub losses: Vec<StepLoss>,
+    pub timings: Timings,
+    pub stopped: Option<String>,
+    pub bytes_per_surfel_gpu: f64,
+    /// Surfels with a LiDAR elevation for L_z, and smoothness edges.
+    pub with_lidar: usize,
+    pub edges: usize,
+}
+
+/// Dense channel and class id of every road class (the BEV semantic layer's choices).
+pub fn road_channels(b: &Bundle) -> Vec<(usize, u8)> {
+    b.manifest
+        .semantic_classes
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| c.role == ClassRole::Road)
+        .map(|(k, c)| (k, c.id))
+        .collect()
+}
+
+impl Session {
+    /// Prepares the surfels, initialises colours and uploads everything to the GPU.
+    pub async fn new(
+        b: &Bundle,
+        cfg: ReconstructConfig,
+        ctx: GpuContext,
+    ) -> Result<Self, ReconstructError> {
+        let m = &b.manifest;
+        let mut timings = Timings::default();
+        let t = Instant::now();
+        let prepared = prepare(b, &cfg.prepare)?;
+        timings.prepare_ms = t.elapsed().as_secs_f64() * 1e3;
+        let t = Instant::now();
+        let planes = PosePlanes::from_manifest(m);
+        let poses = PoseIndex::new(&planes);
+        let holdout = cfg.train.holdout_every;
+        let mut s = prepared.surfels;
+        let colours = crate::init::ipm::surfel_colours(b, &prepared.grid, &s.z, &poses, &|f| {
+            !is_holdout(f, holdout)
+        })?;
+        let chan = targets::channel_of(m);
+        for (k, c) in colours.iter().enumerate() {
+            // No training view sees this surfel: make it transparent, so that the map
+            // shows a hole rather than an invented grey road.
+            if c.is_none() {
+                s.opacity[k] = UNSEEN_OPACITY_LOGIT;
+            }
+            if let Some((rgb, id)) = c {
+                s.rgb[k] = *rgb;
+                if let Some(q) = chan[*id as usize] {
+                    // A confident but not saturated start: softmax ≈ 0.9 for 9 classes.
+                    s.logits[k * s.classes + q as usize] = 4.0;
+                }
+            }
+        }
+        timings.colour_ms = t.elapsed().as_secs_f64() * 1e3;
+        let t = Instant::now();
+        let origin = local_origin(&prepared.grid, &s);
+        let initial = params(&prepared.grid, &s, origin);
+        let lidar = if cfg.train.use_lidar && cfg.train.loss.lidar > 0.0 {
+            lidar_world(b)?.0
+        } else {
+            Vec::new()
+        };
+        let reg = RegData::new(
+            &prepared.grid,
+            &s.z_hat,
+            &s.q,
+            &lidar,
+            origin[2],
+            &cfg.train.loss,
+        );
+        let (train_views, holdout_views) = split_views(m, holdout);
+        if train_views.is_empty() {
+            return Err(ReconstructError::NoViews);
+        }
+        let epochs = if cfg.baseline_ipm {
+            0
+        } else {
+            cfg.train.epochs
+        };
+        let order: Vec<usize> = (0..epochs)
+            .flat_map(|e| epoch_order(train_views.len(), cfg.train.seed, e))
+            .collect();
+        let trainer = Trainer::new(
+            ctx,
+            &initial,
+            &reg,
+            m.cameras.len(),
+            &cfg.train,
+            scene_extent(m),
+            order.len(),
+        )
+        .await?;
+        timings.gpu_setup_ms = t.elapsed().as_secs_f64() * 1e3;
+        Ok(Self {
+            bytes_per_surfel_gpu: trainer.bytes_per_surfel(),
+            with_lidar: reg.with_lidar,
+            edges: reg.edges,
+            prepare_report: prepared.report,
+            level: prepared.grid.level.clone(),
+            grid: prepared.grid,
+            z_hat: s.z_hat,
+            q: s.q,
+            origin,
+            initial,
+            trainer,
+            train_views,
+            holdout_views,
+            order,
+            losses: Vec::new(),
+            timings,
+            stopped: None,
+            cfg,
+        })
+    }
+
+    pub fn total_steps(&self) -> usize {
+        self.order.len()
+    }
+
+    pub fn steps_done(&self) -> usize {
+        self.trainer.steps_done
+    }
+
+    pub fn is_done(&self) -> bool {
+        self.stopped.is_some() || self.steps_done() >= self.total_steps()
+    }
+
+    /// The packed target of a view and its mask count.
+    fn target(&self, b: &Bundle, v: &ViewRef) -> Result<(Vec<u32>, usize), Problem> {
+        let view = &b.manifest.frames[v.frame].views[v.view];
+        let rgb = b.read_rgb(&view.image)?;
+        let label = b.read_label(&view.label)?;
+        let l = &self.cfg.train.loss;
+        Ok(targets::pack(
+            &b.manifest,
+            &rgb,
+            &label,
+            l.open_px,
+            l.dilate_px,
+        ))
+    }
+
+    /// One optimisation step; `Ok(None)` once every step is done. A non-finite loss
+    /// ends the session (the last good model is kept) and is returned as the error.
+    pub async fn step(&mut self, b: &Bundle) -> Result<Option<StepLoss>, ReconstructError> {
+        if self.is_done() {
+            return Ok(None);
+        }
+        let t = Instant::now();
+        let v = self.train_views[self.order[self.steps_done()]];
+        let (target, count) = self.target(b, &v)?;
+        let cam = view_camera(&b.manifest, v.frame, v.view, self.origin, [0.0, 0.0])
+            .ok_or(ReconstructError::NoViews)?;
+        let r = self.trainer.step(&cam, v.camera, &target, count).await;
+        self.timings.train_ms += t.elapsed().as_secs_f64() * 1e3;
+        match r {
+            Ok(l) => {
+                self.losses.push(l);
+                Ok(Some(l))
+            }
+            Err(e) => {
+                self.stopped = Some(e.to_string());
+                Err(e.into())
+            }
+        }
+    }
+
+    /// The BEV geometry: the truth raster's when the bundle has one, else the grid's
+    /// bounding box at the grid resolution.
+    pub fn geometry(&self, truth: Option<&BevRaster>) -> BevGeometry {
+        match truth {
+            Some(t) => BevGeometry::of_raster(t),
+            None => BevGeometry::around(
+                (0..self.grid.len()).map(|k| self.grid.xy(k)),
+                self.grid.resolution,
+                self.grid.resolution,
+            ),
+        }
+    }
+
+    /// Renders the current model's BEV image.
+    pub async fn render_bev(
+        &self,
+        p: &Params<f32>,
+        g: &BevGeometry,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<BevImage, GpuError> {
+        let t = &self.trainer;
+        bev::render(&t.ctx, &t.raster, &t.params, p, g, self.origin, progress).await
+    }
+
+    /// Renders per-surfel scalars (q and refinement level) as a two-channel BEV image
+    /// through the same kernels: they ride in the colour channels of a copy of `p`.
+    pub async fn render_scalars(
+        &self,
+        p: &Params<f32>,
+        g: &BevGeometry,
+    ) -> Result<BevImage, GpuError> {
+        let mut s = p.clone();
+        for (k, c) in s.rgb.iter_mut().enumerate() {
+            *c = [self.q[k], self.level[k] as f32, 0.0];
+        }
+        let t = &self.trainer;
+        let gp = GpuRasterizer::upload(&t.ctx, &s);
+        bev::render(&t.ctx, &t.raster, &gp, &s, g, self.origin, &mut |_, _| {}).await
+    }
+
+    /// Centres of the surfels some training view saw, in world coordinates.
+    pub fn centres(&self, p: &Params<f32>) -> Vec<[f64; 3]> {
+        p.pos
+            .iter()
+            .zip(&p.opacity)
+            .filter(|(_, &o)| o > UNSEEN_OPACITY_LOGIT + 1.0)
+            .map(|(q, _)| {
+                [
+                    q[0] as f64 + self.origin[0],
+                    q[1] as f64 + self.origin[1],
+                    q[2] as f64 + self.origin[2],
+                ]
+            })
+            .collect()
+    }
+
+    /// Road-pixel PSNR of the held-out views for the current model and for the IPM
+    /// baseline model, over pixels inside the loss mask that both cover.
+    pub async fn holdout(&self, b: &Bundle) -> Result<Option<Holdout>, ReconstructError> {
+        if self.holdout_views.is_empty() {
+            return Ok(None);
+        }
+        let t = &self.trainer;
+        let exposures = t.read_exposures().await?;
+        let ipm = GpuRasterizer::upload(&t.ctx, &self.initial);
+        let (mut se, mut se_ipm, mut n) = (0.0f64, 0.0f64, 0u64);
+        let mut frames = std::collections::BTreeSet::new();
+        for v in &self.holdout_views {
+            let (target, _) = self.target(b, v)?;
+            let e = exposures.get(v.camera).copied().unwrap_or([0.0, 0.0]);
+            let Some(cam) = view_camera(&b.manifest, v.frame, v.view, self.origin, e) else {
+                continue;
+            };
+            let cam0 = view_camera(&b.manifest, v.frame, v.view, self.origin, [0.0, 0.0])
+                .ok_or(ReconstructError::NoViews)?;
+            let cull = &self.cfg.train.cull;
+            let f = t.raster.forward(&t.ctx, &t.params, &cam, cull).await?;
+            let a = GpuRasterizer::read_image(&t.ctx, &f).await?;
+            let f = t.raster.forward(&t.ctx, &ipm, &cam0, cull).await?;
+            let bimg = GpuRasterizer::read_image(&t.ctx, &f).await?;
+            let min_alpha = self.cfg.train.loss.min_alpha;
+            for (i, &tp) in target.iter().enumerate() {
+                if tp >> 24 == targets::MASKED
+                    || a.alpha[i] < min_alpha
+                    || bimg.alpha[i] < min_alpha
+                {
+                    continue;
+                }
+                for c in 0..3 {
+                    let tc = ((tp >> (8 * c)) & 255) as f64 / 255.0;
+                    se += (a.rgb[3 * i + c] as f64 - tc).powi(2);
+                    se_ipm += (bimg.rgb[3 * i + c] as f64 - tc).powi(2);
+                }
+                n += 3;
+            }
+            frames.insert(v.frame);
+        }
+        if n == 0 {
+            return Ok(None);
+        }
+        let psnr = |se: f64| -10.0 * (se / n as f64).max(1e-12).log10();
+        Ok(Some(Holdout {
+            psnr_db: psnr(se),
+            ipm_psnr_db: psnr(se_ipm),
+            frames: frames.len(),
+            views: self.holdout_views.len(),
+        }))
+    }
+}
+
+/// Everything a finished run produces.
+pub struct Outcome {
+    pub params: Params<f32>,
+    pub geometry: BevGeometry,
+    pub bev: BevImage,
+    pub raster: BevRaster,
+    /// q and refinement level per BEV pixel (NaN where nothing is rendered).
+    pub confidence: Vec<f32>,
+    pub density: Vec<f32>,
+    pub truth: Option<BevRaster>,
+    pub metrics: Option<Metrics>,
+    pub holdout: Option<Holdout>,
+}
+
+impl Session {
+    /// Reads the model back, renders the BEV layers and scores them.
+    pub async fn finish(
+        &mut self,
+        b: &Bundle,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<Outcome, ReconstructError> {
+        let t = Instant::now();
+        let p = read_params(&self.trainer.ctx, &self.trainer.params).await?;
+        let truth = BevRaster::from_bundle(b)?;
+        let g = self.geometry(truth.as_ref());
+        let bev = self.render_bev(&p, &g, progress).await?;
+        let min_alpha = self.cfg.train.loss.min_alpha;
+        let raster = bev::to_raster(&bev, &g, &road_channels(b), min_alpha);
+        let scalars = self.render_scalars(&p, &g).await?;
+        let layer = |c: usize| -> Vec<f32> {
+            (0..bev.alpha.len())
+                .map(|i| {
+                    if bev.alpha[i] >= min_alpha {
+                        scalars.rgb[3 * i + c]
+                    } else {
+                        f32::NAN
+                    }
+                })
+                .collect()
+        };
+        let (confidence, density) = (layer(0), layer(1));
+        self.timings.bev_ms = t.elapsed().as_secs_f64() * 1e3;
+        let t = Instant::now();
+        let metrics =
+            crate::eval::score(b, truth.as_ref(), &raster, &self.centres(&p), g.resolution)?;
+        let holdout = self.holdout(b).await?;
+        self.timings.eval_ms = t.elapsed().as_secs_f64() * 1e3;
+        Ok(Outcome {
+            params: p,
+            geometry: g,
+            bev,
+            raster,
+            confidence,
+            density,
+            truth,
+            metrics,
+            holdout,
+        })
+    }
+}
+
+/// The report of a finished run (report.json).
+pub fn report(s: &Session, o: &Outcome, bundle: &str) -> serde_json::Value {
+    let t = &s.cfg.train;
+    let last = s.losses.last().copied().unwrap_or_default();
+    let first = s.losses.first().copied().unwrap_or_default();
+    serde_json::json!({
+        "bundle": bundle,
+        "settings": {
+            "resolution_m": s.cfg.prepare.grid.resolution,
+            "half_width_m": s.cfg.prepare.grid.half_width,
+            "adaptive": s.cfg.prepare.refine.enabled,
+            "init": format!("{:?}", s.cfg.prepare.init.method).to_lowercase(),
+            "lidar": t.use_lidar,
+            "baseline": if s.cfg.baseline_ipm { Some("ipm") } else { None },
+            "train": t,
+        },
+        "surfels": s.prepare_report,
+        "gpu_bytes_per_surfel": s.bytes_per_surfel_gpu,
+        "surfels_with_lidar": s.with_lidar,
+        "smoothness_edges": s.edges,
+        "z_change_rms_m": (o.params.pos.iter().zip(&s.initial.pos)
+            .map(|(a, b)| ((a[2] - b[2]) as f64).powi(2)).sum::<f64>()
+            / o.params.len().max(1) as f64).sqrt(),
+        "steps": s.steps_done(),
+        "training_views": s.train_views.len(),
+        "holdout_views": s.holdout_views.len(),
+        "loss_first": first,
+        "loss_last": last,
+        "stopped": s.stopped,
+        "timings": s.timings,
+        "seconds_per_epoch": if t.epochs > 0 && !s.cfg.baseline_ipm {
+            Some(s.timings.train_ms / 1e3 / t.epochs as f64)
+        } else {
+            None
+        },
+        "bev": o.geometry,
+        "metrics": o.metrics,
+        "holdout": o.holdout,
+    })
+}

@@ -1,0 +1,91 @@
+//! One optimisation step on lavapipe against the CPU oracles (loss, regularisers,
+//! rasteriser gradients, Adam), the regulariser oracle against finite differences,
+//! and the loss mask. No adapter is a failure.
+#![cfg(not(target_arch = "wasm32"))]
+
+use rogs::gpu::GpuContext;
+use rogs::loss::regularise::{regularise, RegWeights};
+use rogs::optim::check::compare_step;
+
+#[test]
+fn gpu_step_matches_the_oracles() {
+    let ctx =
+        GpuContext::new_blocking().unwrap_or_else(|e| panic!("GPU tests need an adapter: {e}"));
+    let d = pollster::block_on(compare_step(ctx)).expect("gpu step");
+    eprintln!("{d:#?}");
+    for (name, gpu, cpu) in &d.losses {
+        assert!(*cpu > 0.0, "{name}: the test should exercise this term");
+        assert!(
+            (gpu - cpu).abs() <= 1e-4 * cpu.abs(),
+            "{name}: GPU {gpu} vs CPU {cpu}"
+        );
+    }
+    for (name, r) in &d.grads {
+        assert!(
+            *r < 2e-3,
+            "{name}: gradient differs by {r} of its largest value"
+        );
+    }
+    assert!(d.moved > 1e-3, "the step should change the parameters");
+    assert!(
+        d.params[0] < 1e-5 && d.params[1] < 1e-5,
+        "Adam: {:?}",
+        d.params
+    );
+    assert!(d.exposure < 1e-6, "exposure Adam differs by {}", d.exposure);
+}
+
+#[test]
+fn regulariser_gradient_matches_finite_differences() {
+    use rogs::loss::regularise::RegData;
+    let n: usize = 12;
+    let z: Vec<f32> = (0..n).map(|i| (i as f32 * 0.37).sin() * 0.2).collect();
+    let mut adj_start = vec![0u32];
+    let mut adj = Vec::new();
+    for i in 0..n {
+        for j in [i.wrapping_sub(1), i + 1, i + 4, i.wrapping_sub(4)] {
+            if j < n {
+                adj.push(j as u32);
+            }
+        }
+        adj_start.push(adj.len() as u32);
+    }
+    let priors = (0..n)
+        .map(|i| {
+            [
+                z[i] + 0.03 * (i as f32 - 5.0),
+                0.5 + 0.04 * i as f32,
+                z[i] - 0.02,
+                (i % 2) as f32,
+            ]
+        })
+        .collect();
+    let d = RegData {
+        edges: adj.len() / 2,
+        adj_start,
+        adj,
+        priors,
+        with_lidar: n / 2,
+    };
+    let w = RegWeights {
+        smooth: 0.3,
+        traj: 0.7,
+        huber: 0.05,
+        lidar: 0.5,
+    };
+    let total = |z: &[f32]| regularise(&d, &w, z).0.iter().sum::<f64>();
+    let (_, g) = regularise(&d, &w, &z);
+    for i in 0..n {
+        let h = 1e-3f32;
+        let (mut a, mut b) = (z.clone(), z.clone());
+        a[i] += h;
+        b[i] -= h;
+        let fd = (total(&a) - total(&b)) / (2.0 * h as f64);
+        let err = (fd - g[i] as f64).abs() / fd.abs().max(1e-3);
+        assert!(
+            err < 1e-2,
+            "surfel {i}: analytic {} vs finite difference {fd}",
+            g[i]
+        );
+    }
+}

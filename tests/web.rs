@@ -72,3 +72,21 @@ async fn rasteriser_matches_the_cpu_oracle_in_the_browser() {
         assert!(*rel < 2e-3, "{name}: GPU vs CPU gradient differs by {rel}");
     }
 }
+
+#[wasm_bindgen_test]
+async fn optimisation_step_matches_the_oracles_in_the_browser() {
+    let ctx = match GpuContext::new().await {
+        Ok(c) => c,
+        Err(e) => panic!("WebGPU adapter required: {e}"),
+    };
+    let d = rogs::optim::check::compare_step(ctx).await.expect("gpu step");
+    for (name, gpu, cpu) in &d.losses {
+        assert!(*cpu > 0.0 && (gpu - cpu).abs() <= 1e-4 * cpu.abs(), "{name}: {gpu} vs {cpu}");
+    }
+    for (name, rel) in &d.grads {
+        assert!(*rel < 2e-3, "{name}: GPU vs CPU gradient differs by {rel}");
+    }
+    assert!(d.moved > 1e-3);
+    assert!(d.params[0] < 1e-5 && d.params[1] < 1e-5, "Adam: {:?}", d.params);
+    assert!(d.exposure < 1e-6);
+}

@@ -166,9 +166,10 @@ impl Session {
         } else {
             cfg.train.epochs
         };
-        let order: Vec<usize> = (0..epochs)
+        let mut order: Vec<usize> = (0..epochs)
             .flat_map(|e| epoch_order(train_views.len(), cfg.train.seed, e))
             .collect();
+        order.truncate(cfg.train.max_steps.unwrap_or(usize::MAX));
         let trainer = Trainer::new(
             ctx,
             &initial,
@@ -455,11 +456,12 @@ pub fn report(s: &Session, o: &Outcome, bundle: &str) -> serde_json::Value {
         "loss_last": last,
         "stopped": s.stopped,
         "timings": s.timings,
-        "seconds_per_epoch": if t.epochs > 0 && !s.cfg.baseline_ipm {
-            Some(s.timings.train_ms / 1e3 / t.epochs as f64)
-        } else {
-            None
-        },
+        "seconds_per_step": (s.steps_done() > 0)
+            .then(|| s.timings.train_ms / 1e3 / s.steps_done() as f64),
+        // Measured per step × training views: exact for full epochs, an estimate
+        // when --max-steps cut the run short.
+        "seconds_per_epoch": (s.steps_done() > 0)
+            .then(|| s.timings.train_ms / 1e3 / s.steps_done() as f64 * s.train_views.len() as f64),
         "bev": o.geometry,
         "metrics": o.metrics,
         "holdout": o.holdout,

@@ -79,14 +79,23 @@ async fn optimisation_step_matches_the_oracles_in_the_browser() {
         Ok(c) => c,
         Err(e) => panic!("WebGPU adapter required: {e}"),
     };
-    let d = rogs::optim::check::compare_step(ctx).await.expect("gpu step");
+    let d = rogs::optim::check::compare_step(ctx)
+        .await
+        .expect("gpu step");
     for (name, gpu, cpu) in &d.losses {
-        assert!(*cpu > 0.0 && (gpu - cpu).abs() <= 1e-4 * cpu.abs(), "{name}: {gpu} vs {cpu}");
+        assert!(
+            *cpu > 0.0 && (gpu - cpu).abs() <= 1e-4 * cpu.abs(),
+            "{name}: {gpu} vs {cpu}"
+        );
     }
     for (name, rel) in &d.grads {
         assert!(*rel < 2e-3, "{name}: GPU vs CPU gradient differs by {rel}");
     }
     assert!(d.moved > 1e-3);
-    assert!(d.params[0] < 1e-5 && d.params[1] < 1e-5, "Adam: {:?}", d.params);
+    assert!(
+        d.params[0] < 1e-5 && d.params[1] < 1e-5,
+        "Adam: {:?}",
+        d.params
+    );
     assert!(d.exposure < 1e-6);
 }

@@ -2,6 +2,7 @@
 // ?url=, example) and shows its summary or its problems in words. Nothing here
 // sends user data anywhere: bundles are read in memory by the wasm engine.
 import init, { inspect_bundle, example_bundle, gpu_info } from './pkg/rogs.js';
+import { offerOptimisation, wireMap } from './map.js';
 
 const $ = (id) => document.getElementById(id);
 let engineReady = null;
@@ -114,9 +115,11 @@ async function openBytes(bytes, source) {
     const r = inspect_bundle(bytes);
     if (r.status === 'valid') {
       showSummary(r.summary, source);
-      setStatus(`${source} is a valid bundle.`, 'ok');
+      offerOptimisation(bytes);
+      setStatus(`${source} is a valid bundle: press Optimise to build its map.`, 'ok');
     } else {
       showProblems(r.problems);
+      $('optimise').hidden = true;
       setStatus(`${source} is not a valid bundle: ${r.problems.length} problem(s).`, 'error');
     }
   } catch (e) {
@@ -176,6 +179,7 @@ function wireInputs() {
 
 async function main() {
   wireInputs();
+  wireMap(setStatus);
   engineReady = init();
   try {
     await engineReady;

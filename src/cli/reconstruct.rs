@@ -65,6 +65,10 @@ pub struct Args {
     /// Final z learning rate as a ratio of the scene extent (default 1.6e-5; the paper: 1.6e-6).
     #[arg(long)]
     lr_z_end: Option<f32>,
+    /// Stop after this many steps (for timing part of an epoch on a large bundle;
+    /// report.json then estimates seconds per epoch from the steps done).
+    #[arg(long)]
+    max_steps: Option<usize>,
     /// Seed of the training image order.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -82,6 +86,7 @@ fn config(a: &Args) -> ReconstructConfig {
     };
     c.train.epochs = a.epochs;
     c.train.seed = a.seed;
+    c.train.max_steps = a.max_steps;
     c.train.use_lidar = !a.no_lidar;
     c.train.holdout_every = a.holdout_every.filter(|&k| k > 0);
     if a.no_traj_loss {

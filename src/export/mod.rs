@@ -166,3 +166,52 @@ pub fn files(o: &Outcome, m: &Manifest, origin: [f64; 3]) -> Vec<(String, Vec<u8
     out.push(("surfels.ply".into(), ply::surfels_ply(&o.params, origin)));
     out
 }
+
+/// Names of the layers `layer_rgba` renders.
+pub const LAYERS: [&str; 6] = [
+    "rgb",
+    "semantic",
+    "elevation",
+    "confidence",
+    "density",
+    "error",
+];
+
+/// A layer as RGBA pixels for display (transparent where the map is empty), with the
+/// map's size; `None` for an unknown name or `error` without truth.
+pub fn layer_rgba(o: &Outcome, m: &Manifest, name: &str) -> Option<Vec<u8>> {
+    let r = &o.raster;
+    let (w, h) = (o.geometry.width, o.geometry.height);
+    let valid = |i: usize| r.valid.as_raw()[i] != 0;
+    let from_rgb = |img: &RgbImage| -> Vec<u8> {
+        img.pixels()
+            .enumerate()
+            .flat_map(|(i, p)| [p.0[0], p.0[1], p.0[2], if valid(i) { 255 } else { 0 }])
+            .collect()
+    };
+    let from_values = |v: &[f32], lo: f32, hi: f32| -> Vec<u8> {
+        v.iter()
+            .flat_map(|&x| {
+                let c = colour::ramp((x - lo) / (hi - lo).max(1e-6));
+                [c[0], c[1], c[2], if x.is_finite() { 255 } else { 0 }]
+            })
+            .collect()
+    };
+    match name {
+        "rgb" => Some(from_rgb(&r.rgb)),
+        "semantic" => Some(from_rgb(&semantic_colours(m, &r.class_ids, &r.valid))),
+        "elevation" => {
+            let z = elevation(o);
+            let (lo, hi) = range(&z);
+            Some(from_values(&z, lo, hi))
+        }
+        "confidence" => Some(from_rgb(
+            &image::DynamicImage::from(grey(&o.confidence, w, h)).to_rgb8(),
+        )),
+        "density" => Some(from_rgb(
+            &image::DynamicImage::from(grey(&o.density, w, h)).to_rgb8(),
+        )),
+        "error" => elevation_error(o).map(|e| from_values(&e, 0.0, 0.1)),
+        _ => None,
+    }
+}

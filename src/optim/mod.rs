@@ -26,6 +26,8 @@ pub struct TrainConfig {
     pub use_lidar: bool,
     /// Leave every K-th frame out of training (for held-out evaluation).
     pub holdout_every: Option<usize>,
+    /// Stop after this many steps (benchmarks: time a part of an epoch).
+    pub max_steps: Option<usize>,
     /// Steps between snapshots of the parameters (restored if the loss turns NaN).
     pub snapshot_every: usize,
 }
@@ -41,6 +43,7 @@ impl Default for TrainConfig {
             use_lidar: true,
             holdout_every: None,
             snapshot_every: 10,
+            max_steps: None,
         }
     }
 }

@@ -126,3 +126,51 @@ test('the demo button opens the demo scene', async () => {
   assert.deepEqual(errors, []);
   await page.close();
 });
+
+test('the demo optimises in the page; layers, pan, zoom and exports work; errors keep it alive', async () => {
+  const { page, errors, requests } = await openPage();
+  await page.click('#demo');
+  await page.waitForSelector('#optimise:not([hidden])');
+  await page.selectOption('#set-resolution', '0.2');
+  await page.click('#run');
+  await page.waitForSelector('#viewer:not([hidden])', { timeout: 170_000 });
+  assert.ok(Number(await page.getAttribute('body', 'data-steps')) > 0, 'steps ran');
+  assert.match(await page.textContent('#status'), /Map ready/);
+  assert.match(await page.textContent('#progress-text'), /ETA/);
+  await page.screenshot({ path: path.join(shots, 'map.png'), fullPage: true });
+  // Layers toggle.
+  await page.check('[data-layer="elevation"]');
+  await page.uncheck('[data-layer="rgb"]');
+  await page.screenshot({ path: path.join(shots, 'map-elevation.png') });
+  // Zoom and pan change the view.
+  const before = await page.getAttribute('#map', 'data-view');
+  const box = await page.locator('#map').boundingBox();
+  await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
+  await page.mouse.wheel(0, -300);
+  const zoomed = await page.getAttribute('#map', 'data-view');
+  assert.notEqual(zoomed, before);
+  await page.mouse.down();
+  await page.mouse.move(box.x + box.width / 2 + 60, box.y + box.height / 2 + 20);
+  await page.mouse.up();
+  assert.notEqual(await page.getAttribute('#map', 'data-view'), zoomed);
+  // The exported PNG decodes with the map's size.
+  const size = await page.evaluate(async () => {
+    const a = [...document.querySelectorAll('#exports a')].find((x) => x.download === 'rgb.png');
+    const bmp = await createImageBitmap(await (await fetch(a.href)).blob());
+    const report = [...document.querySelectorAll('#exports a')].find((x) => x.download === 'report.json');
+    const r = await (await fetch(report.href)).json();
+    return [bmp.width, bmp.height, r.bev.width, r.bev.height];
+  });
+  assert.deepEqual(size.slice(0, 2), size.slice(2));
+  assert.ok(size[0] > 10);
+  // A bad bundle afterwards is named, and the page keeps working.
+  await drop(page, 'invalid.zip');
+  await page.waitForSelector('#problems:not([hidden])');
+  assert.equal(await page.isHidden('#optimise'), true);
+  await drop(page, 'valid.zip');
+  await page.waitForSelector('#summary:not([hidden])');
+  assert.deepEqual(errors, []);
+  // Only the page's own assets, and the in-memory blobs of the exports.
+  assert.ok(requests.every((u) => u.startsWith(base) || u.startsWith(`blob:${base}`)), requests.join('\n'));
+  await page.close();
+});

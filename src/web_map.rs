@@ -1,0 +1,134 @@
+//! The page's reconstruction API (wasm32 only): start a session on a bundle, step it
+//! (the page yields to the browser between steps), finish it, and fetch layers and
+//! export files. Errors reach JavaScript as sentences; nothing panics.
+
+use crate::bundle::{Bundle, Limits};
+use crate::gpu::GpuContext;
+use crate::reconstruct::{report, Outcome, ReconstructConfig, Session};
+use serde::Deserialize;
+use wasm_bindgen::prelude::*;
+
+fn err(e: impl std::fmt::Display) -> JsValue {
+    JsValue::from_str(&e.to_string())
+}
+
+/// Settings from the page (every field optional).
+#[derive(Deserialize, Default)]
+#[serde(default)]
+struct Settings {
+    resolution: Option<f64>,
+    half_width: Option<f64>,
+    epochs: Option<usize>,
+    lidar: Option<bool>,
+    adaptive: Option<bool>,
+    init: Option<String>,
+}
+
+#[wasm_bindgen]
+pub struct Reconstruction {
+    bundle: Bundle,
+    session: Session,
+    outcome: Option<Outcome>,
+    files: Vec<(String, Vec<u8>)>,
+}
+
+/// Opens a bundle, prepares the surfels and uploads them to the GPU.
+#[wasm_bindgen]
+pub async fn start_reconstruction(
+    bytes: Vec<u8>,
+    settings: JsValue,
+) -> Result<Reconstruction, JsValue> {
+    let s: Settings = if settings.is_undefined() || settings.is_null() {
+        Settings::default()
+    } else {
+        serde_wasm_bindgen::from_value(settings).map_err(err)?
+    };
+    let bundle = Bundle::from_zip_bytes(bytes, Limits::default()).map_err(err)?;
+    let mut c = ReconstructConfig::default();
+    // The page defaults coarser than the paper's 5 cm so that the demo runs in a
+    // minute or two on a CPU; the settings panel says so.
+    c.prepare.grid.resolution = s.resolution.unwrap_or(0.1);
+    c.prepare.grid.half_width = s.half_width.unwrap_or(4.0);
+    c.train.epochs = s.epochs.unwrap_or(1);
+    c.train.use_lidar = s.lidar.unwrap_or(true);
+    c.prepare.use_lidar = c.train.use_lidar;
+    c.prepare.refine.enabled = s.adaptive.unwrap_or(true);
+    if s.init.as_deref() == Some("nearest") {
+        c.prepare.init.method = crate::init::InitMethod::Nearest;
+    }
+    let ctx = GpuContext::new().await.map_err(err)?;
+    let session = Session::new(&bundle, c, ctx).await.map_err(err)?;
+    Ok(Reconstruction {
+        bundle,
+        session,
+        outcome: None,
+        files: Vec::new(),
+    })
+}
+
+#[wasm_bindgen]
+impl Reconstruction {
+    pub fn total_steps(&self) -> usize {
+        self.session.total_steps()
+    }
+
+    pub fn steps_done(&self) -> usize {
+        self.session.steps_done()
+    }
+
+    pub fn surfels(&self) -> usize {
+        self.session.prepare_report.surfels
+    }
+
+    /// One step; resolves to the total loss, or `undefined` when all steps are done.
+    pub async fn step(&mut self) -> Result<Option<f64>, JsValue> {
+        let l = self.session.step(&self.bundle).await.map_err(err)?;
+        Ok(l.map(|l| l.total()))
+    }
+
+    /// Renders the layers, scores them and prepares the export files; resolves to the
+    /// report (as JSON text).
+    pub async fn finish(&mut self) -> Result<String, JsValue> {
+        let o = self
+            .session
+            .finish(&self.bundle, &mut |_, _| {})
+            .await
+            .map_err(err)?;
+        let mut files = crate::export::files(&o, &self.bundle.manifest, self.session.origin);
+        let r = report(&self.session, &o, &self.bundle.manifest.name);
+        let text = serde_json::to_string_pretty(&r).map_err(err)?;
+        files.push(("report.json".into(), text.clone().into_bytes()));
+        self.files = files;
+        self.outcome = Some(o);
+        Ok(text)
+    }
+
+    pub fn width(&self) -> u32 {
+        self.outcome.as_ref().map_or(0, |o| o.geometry.width)
+    }
+
+    pub fn height(&self) -> u32 {
+        self.outcome.as_ref().map_or(0, |o| o.geometry.height)
+    }
+
+    /// RGBA pixels of a layer (rgb, semantic, elevation, confidence, density, error).
+    pub fn layer(&self, name: &str) -> Result<Vec<u8>, JsValue> {
+        let o = self.outcome.as_ref().ok_or_else(|| err("finish first"))?;
+        crate::export::layer_rgba(o, &self.bundle.manifest, name)
+            .ok_or_else(|| err(format!("no layer {name:?} for this map")))
+    }
+
+    /// Names of the export files.
+    pub fn file_names(&self) -> Vec<String> {
+        self.files.iter().map(|f| f.0.clone()).collect()
+    }
+
+    /// The bytes of one export file.
+    pub fn file(&self, name: &str) -> Result<Vec<u8>, JsValue> {
+        self.files
+            .iter()
+            .find(|f| f.0 == name)
+            .map(|f| f.1.clone())
+            .ok_or_else(|| err(format!("no file {name:?}")))
+    }
+}

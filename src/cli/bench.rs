@@ -172,9 +172,9 @@ fn raster(
         pollster::block_on(r.backward(&ctx, &gp, &f, &grads)).map_err(|e| e.to_string())?;
         both.push(t.elapsed().as_secs_f64());
         pairs = f.pairs;
-        // Pixel×surfel pairs: every pair of a tile against the tile's 256 pixels
+        // Pixel×surfel pairs: every pair of a tile against the tile's pixels
         // (an upper bound on evaluations: early termination skips some).
-        evaluations = pairs as u64 * 256;
+        evaluations = pairs as u64 * (crate::render::TILE * crate::render::TILE) as u64;
     }
     let (tf, tb) = (median(fwd), median(both));
     let out = serde_json::json!({

@@ -95,6 +95,25 @@ fn copy_params(enc: &mut wgpu::CommandEncoder, from: &GpuParams, to: &GpuParams)
     }
 }
 
+/// Every per-surfel buffer is bound whole, so the largest (the Adam moments,
+/// 2 (13 + channels) floats per surfel, or the projected surfels, 24) must fit the
+/// adapter's storage binding. Splitting the model into chunks is not done yet: until
+/// then a model that does not fit is refused with what to change.
+pub fn check_fits(ctx: &GpuContext, surfels: usize, channels: usize) -> Result<(), GpuError> {
+    let per = 4 * (2 * (13 + channels)).max(24).max(VIEW_GRAD + channels) as u64;
+    let limit = ctx.limits.max_storage_buffer_binding_size;
+    let need = per * surfels as u64;
+    if need > limit {
+        return Err(GpuError::Validation(format!(
+            "{surfels} surfels need {} MiB in one GPU buffer, but this adapter binds at most {} MiB ({} surfels with {channels} classes): use a coarser grid (--resolution), a narrower corridor (--half-width), or split the drive into shorter bundles",
+            need >> 20,
+            limit >> 20,
+            limit / per
+        )));
+    }
+    Ok(())
+}
+
 /// A (x, y) dispatch over `n` invocations in workgroups of 256, and its row stride.
 fn grid_1d(ctx: &GpuContext, n: u32) -> ((u32, u32, u32), u32) {
     let (gx, gy) = ctx.dispatch_2d(n.div_ceil(256));
@@ -112,6 +131,7 @@ impl Trainer {
         extent: f32,
         total_steps: usize,
     ) -> Result<Self, GpuError> {
+        check_fits(&ctx, p.len(), p.channels)?;
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let raster = GpuRasterizer::new(&ctx).await?;
         let adam_src = include_str!("../../shaders/adam.wgsl");

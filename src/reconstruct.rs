@@ -467,3 +467,79 @@ pub fn report(s: &Session, o: &Outcome, bundle: &str) -> serde_json::Value {
         "holdout": o.holdout,
     })
 }
+
+/// RGBA pixels of an RGB float image (0..1), opaque where `alpha` ≥ `min_alpha`.
+pub fn rgba(rgb: &[f32], alpha: &[f32], min_alpha: f32) -> Vec<u8> {
+    rgb.chunks_exact(3)
+        .zip(alpha)
+        .flat_map(|(c, &a)| {
+            let q = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+            [
+                q(c[0]),
+                q(c[1]),
+                q(c[2]),
+                if a >= min_alpha { 255 } else { 0 },
+            ]
+        })
+        .collect()
+}
+
+impl Session {
+    /// The current model's BEV colour as RGBA over `g` (a live preview while training).
+    pub async fn preview(&self, g: &BevGeometry) -> Result<Vec<u8>, GpuError> {
+        let p = read_params(&self.trainer.ctx, &self.trainer.params).await?;
+        let img = self.render_bev(&p, g, &mut |_, _| {}).await?;
+        Ok(rgba(&img.rgb, &img.alpha, self.cfg.train.loss.min_alpha))
+    }
+
+    /// Vehicle positions of the bundle as BEV pixel coordinates (x, y pairs) of `g`.
+    pub fn trajectory(b: &Bundle, g: &BevGeometry) -> Vec<f32> {
+        b.manifest
+            .frames
+            .iter()
+            .flat_map(|f| {
+                let (x, y) = (f.vehicle_to_world[0][3], f.vehicle_to_world[1][3]);
+                [
+                    ((x - g.origin[0]) / g.resolution) as f32,
+                    ((g.origin[1] - y) / g.resolution) as f32,
+                ]
+            })
+            .collect()
+    }
+
+    /// The current model rendered into view `view` of frame `frame` (with its
+    /// camera's learned exposure) beside the input image, both RGBA of the camera's
+    /// size; `None` when the frame or view does not exist.
+    pub async fn camera_view(
+        &self,
+        b: &Bundle,
+        frame: usize,
+        view: usize,
+    ) -> Result<Option<(u32, u32, Vec<u8>, Vec<u8>)>, ReconstructError> {
+        let m = &b.manifest;
+        let Some(v) = m.frames.get(frame).and_then(|f| f.views.get(view)) else {
+            return Ok(None);
+        };
+        let Some(camera) = m.cameras.iter().position(|c| c.name == v.camera) else {
+            return Ok(None);
+        };
+        let t = &self.trainer;
+        let e = t.read_exposures().await?;
+        let e = e.get(camera).copied().unwrap_or([0.0, 0.0]);
+        let Some(cam) = view_camera(m, frame, view, self.origin, e) else {
+            return Ok(None);
+        };
+        let f = t
+            .raster
+            .forward(&t.ctx, &t.params, &cam, &self.cfg.train.cull)
+            .await?;
+        let img = GpuRasterizer::read_image(&t.ctx, &f).await?;
+        let rendered = rgba(&img.rgb, &img.alpha, self.cfg.train.loss.min_alpha);
+        let input = b.read_rgb(&v.image)?;
+        let input = input
+            .pixels()
+            .flat_map(|p| [p.0[0], p.0[1], p.0[2], 255])
+            .collect();
+        Ok(Some((cam.width, cam.height, rendered, input)))
+    }
+}

@@ -2,7 +2,9 @@
 //! (the page yields to the browser between steps), finish it, and fetch layers and
 //! export files. Errors reach JavaScript as sentences; nothing panics.
 
+use crate::bev::BevGeometry;
 use crate::bundle::{Bundle, Limits};
+use crate::eval::BevRaster;
 use crate::gpu::GpuContext;
 use crate::reconstruct::{report, Outcome, ReconstructConfig, Session};
 use serde::Deserialize;
@@ -28,6 +30,8 @@ struct Settings {
 pub struct Reconstruction {
     bundle: Bundle,
     session: Session,
+    /// The map's geometry, known from the start so that previews line up with it.
+    geometry: BevGeometry,
     outcome: Option<Outcome>,
     files: Vec<(String, Vec<u8>)>,
 }
@@ -58,9 +62,12 @@ pub async fn start_reconstruction(
     }
     let ctx = GpuContext::new().await.map_err(err)?;
     let session = Session::new(&bundle, c, ctx).await.map_err(err)?;
+    let truth = BevRaster::from_bundle(&bundle).map_err(err)?;
+    let geometry = session.geometry(truth.as_ref());
     Ok(Reconstruction {
         bundle,
         session,
+        geometry,
         outcome: None,
         files: Vec::new(),
     })
@@ -103,12 +110,57 @@ impl Reconstruction {
         Ok(text)
     }
 
+    /// Map width and height in pixels (the same for previews and the final layers).
     pub fn width(&self) -> u32 {
-        self.outcome.as_ref().map_or(0, |o| o.geometry.width)
+        self.geometry.width
     }
 
     pub fn height(&self) -> u32 {
-        self.outcome.as_ref().map_or(0, |o| o.geometry.height)
+        self.geometry.height
+    }
+
+    /// Metres per map pixel.
+    pub fn resolution(&self) -> f64 {
+        self.geometry.resolution
+    }
+
+    /// RGBA of the current model's BEV colour (throttle: it renders the whole map).
+    pub async fn preview(&self) -> Result<Vec<u8>, JsValue> {
+        self.session.preview(&self.geometry).await.map_err(err)
+    }
+
+    /// Vehicle positions as map pixel coordinates, x and y interleaved.
+    pub fn trajectory(&self) -> Vec<f32> {
+        Session::trajectory(&self.bundle, &self.geometry)
+    }
+
+    /// Number of frames, for the camera-view panel.
+    pub fn frames(&self) -> usize {
+        self.bundle.manifest.frames.len()
+    }
+
+    /// `{width, height, rendered, input}` (RGBA) for view `view` of frame `frame`.
+    pub async fn camera_view(&self, frame: usize, view: usize) -> Result<JsValue, JsValue> {
+        let r = self
+            .session
+            .camera_view(&self.bundle, frame, view)
+            .await
+            .map_err(err)?
+            .ok_or_else(|| err(format!("frame {frame} has no view {view}")))?;
+        let o = js_sys::Object::new();
+        let set = |k: &str, v: JsValue| js_sys::Reflect::set(&o, &k.into(), &v);
+        set("width", r.0.into())?;
+        set("height", r.1.into())?;
+        set("rendered", js_sys::Uint8Array::from(&r.2[..]).into())?;
+        set("input", js_sys::Uint8Array::from(&r.3[..]).into())?;
+        Ok(o.into())
+    }
+
+    /// Elevation (world metres) at map pixel (x, y) of the finished map, if valid.
+    pub fn elevation_at(&self, x: u32, y: u32) -> Option<f32> {
+        let o = self.outcome.as_ref()?;
+        let r = &o.raster;
+        (x < r.width && y < r.height && r.is_valid(x, y)).then(|| r.elevation_at(x, y))
     }
 
     /// RGBA pixels of a layer (rgb, semantic, elevation, confidence, density, error).

@@ -115,7 +115,7 @@ async function openBytes(bytes, source) {
     const r = inspect_bundle(bytes);
     if (r.status === 'valid') {
       showSummary(r.summary, source);
-      offerOptimisation(bytes);
+      offerOptimisation(bytes, r.summary.classes);
       setStatus(`${source} is a valid bundle: press Optimise to build its map.`, 'ok');
     } else {
       showProblems(r.problems);

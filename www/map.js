@@ -2,15 +2,21 @@
 // to the browser between steps so the page stays responsive), then shows the BEV
 // layers on a canvas with pan, zoom, visibility and opacity, and offers the exports.
 import { start_reconstruction } from './pkg/rogs.js';
+import { createGpuView } from './gpu-view.js';
 
 const $ = (id) => document.getElementById(id);
 const LAYERS = ['rgb', 'semantic', 'elevation', 'confidence', 'density', 'error'];
+// Drawn in this order, the trajectory on top.
+const ORDER = [...LAYERS, 'trajectory'];
+let gpuView = null; // the WebGPU renderer of the map canvas, or null for 2D
 let bundleBytes = null;
+let classes = [];
 let run = null; // { rec, paused, stopped }
 const view = { scale: 1, x: 0, y: 0, layers: {} };
 
-export function offerOptimisation(bytes) {
+export function offerOptimisation(bytes, bundleClasses) {
   bundleBytes = bytes;
+  classes = bundleClasses || [];
   $('optimise').hidden = false;
   $('run').disabled = false;
 }
@@ -64,6 +70,9 @@ async function optimise(setStatus) {
   const total = rec.total_steps();
   const losses = [];
   const t0 = performance.now();
+  let lastPreview = performance.now();
+  let previewGap = 2000; // the first preview after 2 s, then every 4 s or 5× its cost
+  resetViewer(rec);
   let error = null;
   while (!run.stopped) {
     if (run.paused) { await new Promise((r) => setTimeout(r, 100)); continue; }
@@ -82,6 +91,18 @@ async function optimise(setStatus) {
     $('progress-text').textContent = `step ${done} / ${total} · loss ${loss.toFixed(4)} · ${per.toFixed(2)} s per step · ETA ${fmtTime(per * (total - done))}`;
     document.body.dataset.steps = String(done);
     if (done % 5 === 0) drawLoss(losses);
+    // A live preview of the map, throttled: it renders the whole map.
+    if (done < total && performance.now() - lastPreview > previewGap) {
+      const p0 = performance.now();
+      try {
+        setLayer('rgb', await rec.preview(), rec.width(), rec.height());
+        $('viewer').hidden = false;
+        draw();
+        document.body.dataset.previews = String(Number(document.body.dataset.previews || 0) + 1);
+      } catch (e) { /* a failed preview leaves the last one; the final map follows */ }
+      lastPreview = performance.now();
+      previewGap = Math.max(4000, 5 * (lastPreview - p0));
+    }
     // Yield so the page repaints and the buttons respond.
     await new Promise((r) => setTimeout(r, 0));
   }
@@ -107,33 +128,96 @@ function showMetrics(report) {
   el.textContent = `PSNR ${f(m.psnr_db, 2, ' dB')} · mIoU ${f(m.miou, 3, '')} · elevation RMSE ${f(m.elevation_rmse_m * 100, 1, ' cm')}`;
 }
 
-function showMap(rec, report) {
-  const w = rec.width(), h = rec.height();
-  view.layers = {};
-  const list = $('layers');
-  list.innerHTML = '';
-  for (const name of LAYERS) {
-    let px;
-    try { px = rec.layer(name); } catch { continue; }
+function setLayer(name, px, w, h) {
+  let l = view.layers[name];
+  if (!l) {
     const c = document.createElement('canvas');
     c.width = w; c.height = h;
-    c.getContext('2d').putImageData(new ImageData(new Uint8ClampedArray(px), w, h), 0, 0);
-    view.layers[name] = { canvas: c, visible: name === 'rgb', opacity: 1 };
+    l = view.layers[name] = { canvas: c, visible: name === 'rgb', opacity: 1 };
     const li = document.createElement('li');
-    li.innerHTML = `<label><input type="checkbox" data-layer="${name}" ${name === 'rgb' ? 'checked' : ''}> ${name}</label>
+    li.innerHTML = `<label><input type="checkbox" data-layer="${name}" ${l.visible ? 'checked' : ''}> ${name}</label>
       <input type="range" min="0" max="1" step="0.05" value="1" data-opacity="${name}" aria-label="${name} opacity">`;
-    list.append(li);
+    li.querySelector('[data-layer]').addEventListener('change', (e) => { l.visible = e.target.checked; draw(); });
+    li.querySelector('[data-opacity]').addEventListener('input', (e) => { l.opacity = Number(e.target.value); draw(); });
+    $('layers').append(li);
   }
-  list.querySelectorAll('[data-layer]').forEach((cb) => cb.addEventListener('change', () => {
-    view.layers[cb.dataset.layer].visible = cb.checked; draw();
-  }));
-  list.querySelectorAll('[data-opacity]').forEach((r) => r.addEventListener('input', () => {
-    view.layers[r.dataset.opacity].opacity = Number(r.value); draw();
-  }));
+  if (px) l.canvas.getContext('2d').putImageData(new ImageData(new Uint8ClampedArray(px), w, h), 0, 0);
+  if (gpuView) gpuView.setLayer(name, l.canvas);
+}
+
+// The trajectory as a raster layer of the map's size (red polyline).
+function trajectoryLayer(t, w, h) {
+  const c = document.createElement('canvas');
+  c.width = w; c.height = h;
+  const g = c.getContext('2d');
+  g.strokeStyle = '#ff3b30';
+  g.lineWidth = Math.max(2, w / 400);
+  g.beginPath();
+  for (let i = 0; i + 1 < t.length; i += 2) {
+    if (i) g.lineTo(t[i], t[i + 1]); else g.moveTo(t[i], t[i + 1]);
+  }
+  g.stroke();
+  return g.getImageData(0, 0, w, h).data;
+}
+
+function resetViewer(rec) {
+  view.layers = {};
+  $('layers').innerHTML = '';
+  $('exports').innerHTML = '';
+  $('metrics').textContent = 'Optimising: the map below is a live preview.';
+  $('camera-panel').hidden = true;
+  view.rec = rec;
+  view.trajectory = rec.trajectory();
   const canvas = $('map');
+  const w = rec.width(), h = rec.height();
   view.scale = Math.min(canvas.width / w, canvas.height / h);
   view.x = (canvas.width - w * view.scale) / 2;
   view.y = (canvas.height - h * view.scale) / 2;
+  setLayer('trajectory', trajectoryLayer(view.trajectory, w, h), w, h);
+}
+
+function showLegend(report, rec) {
+  const el = $('legend');
+  el.innerHTML = '';
+  const sem = document.createElement('span');
+  for (const c of classes.filter((c) => c.role === 'road')) {
+    const s = document.createElement('span');
+    s.className = 'swatch';
+    s.style.background = `rgb(${c.color.join(',')})`;
+    sem.append(s, ` ${c.name} `);
+  }
+  let geo = {};
+  try { geo = JSON.parse(new TextDecoder().decode(rec.file('bev.json'))); } catch { /* no legend values */ }
+  const elev = document.createElement('span');
+  if (geo.elevation_min_m !== undefined) {
+    elev.innerHTML = ` · elevation <span class="ramp"></span> ${geo.elevation_min_m.toFixed(2)} – ${geo.elevation_max_m.toFixed(2)} m · error 0 – 10 cm`;
+  }
+  el.append('classes: ', sem, elev);
+}
+
+async function showCameraView() {
+  const rec = view.rec;
+  if (!rec) return;
+  try {
+    const r = await rec.camera_view(Number($('cam-frame').value), Number($('cam-view').value));
+    for (const [id, px] of [['cam-rendered', r.rendered], ['cam-input', r.input]]) {
+      const c = $(id);
+      c.width = r.width; c.height = r.height;
+      c.getContext('2d').putImageData(new ImageData(new Uint8ClampedArray(px), r.width, r.height), 0, 0);
+    }
+    $('cam-error').textContent = '';
+  } catch (e) {
+    $('cam-error').textContent = String(e);
+  }
+}
+
+function showMap(rec, report) {
+  const w = rec.width(), h = rec.height();
+  for (const name of LAYERS) {
+    let px;
+    try { px = rec.layer(name); } catch { continue; }
+    setLayer(name, px, w, h);
+  }
   const ex = $('exports');
   ex.innerHTML = '';
   for (const name of rec.file_names()) {
@@ -144,19 +228,28 @@ function showMap(rec, report) {
     ex.append(a, ' ');
   }
   showMetrics(report);
+  showLegend(report, rec);
+  $('cam-frame').max = String(rec.frames() - 1);
+  $('camera-panel').hidden = false;
   $('viewer').hidden = false;
   draw();
+  showCameraView();
 }
 
 function draw() {
   const canvas = $('map');
+  if (gpuView) {
+    gpuView.draw(ORDER, view.layers, view);
+    canvas.dataset.view = `${view.scale.toFixed(4)},${view.x.toFixed(1)},${view.y.toFixed(1)}`;
+    return;
+  }
   const g = canvas.getContext('2d');
   g.setTransform(1, 0, 0, 1, 0, 0);
   g.fillStyle = '#111';
   g.fillRect(0, 0, canvas.width, canvas.height);
   g.imageSmoothingEnabled = false;
   g.setTransform(view.scale, 0, 0, view.scale, view.x, view.y);
-  for (const name of LAYERS) {
+  for (const name of ORDER) {
     const l = view.layers[name];
     if (!l || !l.visible) continue;
     g.globalAlpha = l.opacity;
@@ -167,6 +260,11 @@ function draw() {
 }
 
 export function wireMap(setStatus) {
+  // WebGPU for the map when the browser gives a WebGPU canvas, else a 2D canvas.
+  createGpuView($('map'))
+    .then((v) => { gpuView = v; })
+    .catch(() => { gpuView = null; })
+    .finally(() => { $('map').dataset.renderer = gpuView ? 'webgpu' : '2d'; });
   $('run').addEventListener('click', () => optimise(setStatus));
   $('pause').addEventListener('click', () => {
     if (!run) return;
@@ -174,10 +272,17 @@ export function wireMap(setStatus) {
     $('pause').textContent = run.paused ? 'Resume' : 'Pause';
   });
   $('stop').addEventListener('click', () => { if (run) run.stopped = true; });
+  $('cam-frame').addEventListener('change', showCameraView);
+  $('cam-view').addEventListener('change', showCameraView);
   const canvas = $('map');
   let drag = null;
   canvas.addEventListener('pointerdown', (e) => { drag = { x: e.clientX, y: e.clientY }; canvas.setPointerCapture(e.pointerId); });
   canvas.addEventListener('pointermove', (e) => {
+    const r = canvas.getBoundingClientRect();
+    const mx = (e.clientX - r.left) * (canvas.width / r.width), my = (e.clientY - r.top) * (canvas.height / r.height);
+    const px = Math.floor((mx - view.x) / view.scale), py = Math.floor((my - view.y) / view.scale);
+    const z = view.rec && px >= 0 && py >= 0 ? view.rec.elevation_at(px, py) : undefined;
+    $('cursor').textContent = z === undefined ? '' : `elevation under the cursor: ${z.toFixed(3)} m`;
     if (!drag) return;
     view.x += e.clientX - drag.x; view.y += e.clientY - drag.y;
     drag = { x: e.clientX, y: e.clientY };

@@ -132,11 +132,18 @@ test('the demo optimises in the page; layers, pan, zoom and exports work; errors
   await page.click('#demo');
   await page.waitForSelector('#optimise:not([hidden])');
   await page.selectOption('#set-resolution', '0.2');
+  await page.fill('#set-epochs', '10');
   await page.click('#run');
-  await page.waitForSelector('#viewer:not([hidden])', { timeout: 170_000 });
+  await page.waitForSelector('#viewer:not([hidden]) #exports a', { timeout: 170_000 });
   assert.ok(Number(await page.getAttribute('body', 'data-steps')) > 0, 'steps ran');
   assert.match(await page.textContent('#status'), /Map ready/);
   assert.match(await page.textContent('#progress-text'), /ETA/);
+  assert.ok(Number(await page.getAttribute('body', 'data-previews')) >= 1, 'the map updated live');
+  // The camera-view panel shows the rendered view beside the input image.
+  await page.waitForFunction(() => document.getElementById('cam-rendered').width > 1);
+  assert.equal(await page.getAttribute('#cam-rendered', 'width'), await page.getAttribute('#cam-input', 'width'));
+  await page.check('[data-layer="trajectory"]');
+  assert.equal(await page.getAttribute('#map', 'data-renderer'), 'webgpu');
   await page.screenshot({ path: path.join(shots, 'map.png'), fullPage: true });
   // Layers toggle.
   await page.check('[data-layer="elevation"]');
@@ -144,6 +151,7 @@ test('the demo optimises in the page; layers, pan, zoom and exports work; errors
   await page.screenshot({ path: path.join(shots, 'map-elevation.png') });
   // Zoom and pan change the view.
   const before = await page.getAttribute('#map', 'data-view');
+  await page.locator('#map').scrollIntoViewIfNeeded();
   const box = await page.locator('#map').boundingBox();
   await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
   await page.mouse.wheel(0, -300);

@@ -227,6 +227,29 @@ function showMap(rec, report) {
     a.href = URL.createObjectURL(new Blob([rec.file(name)]));
     ex.append(a, ' ');
   }
+  // The layers as shown (visible ones, with their opacity) at map resolution.
+  const shown = document.createElement('a');
+  shown.textContent = 'map as shown.png';
+  shown.href = '#';
+  shown.addEventListener('click', (e) => {
+    e.preventDefault();
+    const c = document.createElement('canvas');
+    c.width = w; c.height = h;
+    const g = c.getContext('2d');
+    for (const name of ORDER) {
+      const l = view.layers[name];
+      if (!l || !l.visible) continue;
+      g.globalAlpha = l.opacity;
+      g.drawImage(l.canvas, 0, 0);
+    }
+    c.toBlob((b) => {
+      const a = document.createElement('a');
+      a.download = 'map-as-shown.png';
+      a.href = URL.createObjectURL(b);
+      a.click();
+    });
+  });
+  ex.append(shown);
   showMetrics(report);
   showLegend(report, rec);
   $('cam-frame').max = String(rec.frames() - 1);
@@ -276,7 +299,31 @@ export function wireMap(setStatus) {
   $('cam-view').addEventListener('change', showCameraView);
   const canvas = $('map');
   let drag = null;
-  canvas.addEventListener('pointerdown', (e) => { drag = { x: e.clientX, y: e.clientY }; canvas.setPointerCapture(e.pointerId); });
+  const pointers = new Map(); // for pinch zoom: two pointers' positions
+  let pinch = null;
+  const zoomAt = (mx, my, k) => {
+    view.x = mx - (mx - view.x) * k; view.y = my - (my - view.y) * k; view.scale *= k;
+    draw();
+  };
+  canvas.addEventListener('pointerdown', (e) => {
+    pointers.set(e.pointerId, [e.clientX, e.clientY]);
+    drag = pointers.size === 1 ? { x: e.clientX, y: e.clientY } : null;
+    canvas.setPointerCapture(e.pointerId);
+  });
+  canvas.addEventListener('pointermove', (e) => {
+    if (!pointers.has(e.pointerId)) return;
+    pointers.set(e.pointerId, [e.clientX, e.clientY]);
+    if (pointers.size !== 2) { pinch = null; return; }
+    const [a, b] = [...pointers.values()];
+    const d = Math.hypot(a[0] - b[0], a[1] - b[1]);
+    const r = canvas.getBoundingClientRect();
+    const mx = ((a[0] + b[0]) / 2 - r.left) * (canvas.width / r.width), my = ((a[1] + b[1]) / 2 - r.top) * (canvas.height / r.height);
+    if (pinch) zoomAt(mx, my, d / pinch);
+    pinch = d;
+  });
+  const release = (e) => { pointers.delete(e.pointerId); pinch = null; };
+  canvas.addEventListener('pointercancel', release);
+  canvas.addEventListener('pointerup', release);
   canvas.addEventListener('pointermove', (e) => {
     const r = canvas.getBoundingClientRect();
     const mx = (e.clientX - r.left) * (canvas.width / r.width), my = (e.clientY - r.top) * (canvas.height / r.height);
@@ -293,8 +340,6 @@ export function wireMap(setStatus) {
     e.preventDefault();
     const r = canvas.getBoundingClientRect();
     const mx = (e.clientX - r.left) * (canvas.width / r.width), my = (e.clientY - r.top) * (canvas.height / r.height);
-    const k = Math.exp(-e.deltaY * 0.002);
-    view.x = mx - (mx - view.x) * k; view.y = my - (my - view.y) * k; view.scale *= k;
-    draw();
+    zoomAt(mx, my, Math.exp(-e.deltaY * 0.002));
   }, { passive: false });
 }

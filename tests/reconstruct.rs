@@ -101,3 +101,18 @@ fn a_nan_stops_optimisation_and_keeps_the_last_good_model() {
     let kept = pollster::block_on(t.read_params()).expect("read");
     assert_eq!(kept.logits, p.logits, "the model of step 0 is restored");
 }
+
+#[test]
+fn an_uncaught_gpu_error_becomes_an_error_in_words() {
+    let c = ctx();
+    assert!(c.check().is_ok());
+    // MAP_READ may only be combined with COPY_DST: a validation error no scope catches.
+    let _ = c.device.create_buffer(&wgpu::BufferDescriptor {
+        label: None,
+        size: 16,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::STORAGE,
+        mapped_at_creation: false,
+    });
+    let e = c.check().expect_err("the error is recorded, not a panic");
+    assert!(e.to_string().starts_with("GPU error"), "{e}");
+}

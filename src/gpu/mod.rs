@@ -23,6 +23,8 @@ pub enum GpuError {
     Readback(String),
     #[error("GPU error: {0}")]
     Validation(String),
+    #[error("{0}")]
+    Failed(String),
 }
 
 /// What to install or enable when no adapter is found.
@@ -107,6 +109,9 @@ pub struct GpuContext {
     pub report: AdapterReport,
     pub features: wgpu::Features,
     pub limits: wgpu::Limits,
+    /// The first GPU error no error scope caught (out of memory, a lost device, a
+    /// validation error): recorded instead of panicking, and returned by `check()`.
+    failure: std::sync::Arc<std::sync::Mutex<Option<String>>>,
 }
 
 impl GpuContext {
@@ -165,13 +170,47 @@ impl GpuContext {
             timestamps: features.contains(wgpu::Features::TIMESTAMP_QUERY),
             accumulation,
         };
+        let failure = std::sync::Arc::new(std::sync::Mutex::new(None::<String>));
+        let record = |slot: &std::sync::Arc<std::sync::Mutex<Option<String>>>, msg: String| {
+            if let Ok(mut s) = slot.lock() {
+                s.get_or_insert(msg);
+            }
+        };
+        let slot = failure.clone();
+        device.on_uncaptured_error(std::sync::Arc::new(move |e: wgpu::Error| {
+            let msg = match &e {
+                wgpu::Error::OutOfMemory { .. } => {
+                    "the GPU ran out of memory; use a coarser grid or a shorter drive".to_string()
+                }
+                _ => format!("GPU error: {e}"),
+            };
+            record(&slot, msg);
+        }));
+        let slot = failure.clone();
+        device.set_device_lost_callback(move |_, why| {
+            record(
+                &slot,
+                format!(
+                    "the GPU device was lost ({why}); close other GPU-heavy pages or programs and try again"
+                ),
+            );
+        });
         Ok(Self {
             device,
             queue,
             report,
             features,
             limits,
+            failure,
         })
+    }
+
+    /// The first uncaught GPU error or device loss since the context was made.
+    pub fn check(&self) -> Result<(), GpuError> {
+        match self.failure.lock().ok().and_then(|s| s.clone()) {
+            Some(msg) => Err(GpuError::Failed(msg)),
+            None => Ok(()),
+        }
     }
 
     /// Blocking constructor for the CLI and native tests.

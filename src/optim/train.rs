@@ -394,6 +394,8 @@ impl Trainer {
         dispatch(&mut enc, &self.k.exposure, &bg, (1, 1, 1));
         ctx.queue.submit([enc.finish()]);
         let sums = read_f32(ctx, &reg_partial, 3 * swgs).await?;
+        // Out of memory or a lost device: stop with the words rather than train on.
+        ctx.check()?;
         for s in sums.chunks_exact(3) {
             loss.smooth += s[0] as f64;
             loss.traj += s[1] as f64;

@@ -2,15 +2,20 @@
 //! rasterize_backward) to parameter gradients: d/dposition = Wᵀ d/dpc; the rotation
 //! columns' gradients Wᵀ d/dtu, Wᵀ d/dtv, Wᵀ d/dn through the quaternion (with its
 //! normalisation); log-scales through exp; opacity, colour, logits pass through.
-//! Output stride per surfel: pos 3, rotation 4, log_scale 2, opacity 1, rgb 3, logits C.
+//!
+//! In place: each surfel's parameter gradients (pos 3, rotation 4, log_scale 2,
+//! opacity 1, rgb 3, logits C) overwrite the head of its own view-gradient slot
+//! (18 + C floats), so the optimiser holds no separate gradient buffer. An invocation
+//! touches only its own slot and reads every camera-space value before the slot it
+//! lands on is written (slot k + 5 is read before slot k is written; logits move
+//! down by 5 in increasing order), so no other invocation or ordering is involved.
 //!
 //! Oracle: src/render/project_backward.rs.
 
 @group(0) @binding(0) var<uniform> view: View;
-@group(0) @binding(1) var<storage, read> view_grad: array<f32>;
+@group(0) @binding(1) var<storage, read_write> view_grad: array<f32>;
 @group(0) @binding(2) var<storage, read> rotation: array<f32>;
 @group(0) @binding(3) var<storage, read> log_scale: array<f32>;
-@group(0) @binding(4) var<storage, read_write> grads: array<f32>;
 @group(0) @binding(5) var<uniform> grid: vec4<u32>;
 
 fn wt(v: vec3<f32>) -> vec3<f32> {
@@ -26,13 +31,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let ch = view.channels;
     let vs = 18u + ch;
     let v = vs * i;
-    let os = 13u + ch;
-    let o = os * i;
     let dpc = vec3<f32>(view_grad[v], view_grad[v + 1u], view_grad[v + 2u]);
     let dp = wt(dpc);
-    grads[o] = dp.x;
-    grads[o + 1u] = dp.y;
-    grads[o + 2u] = dp.z;
     let g0 = wt(vec3<f32>(view_grad[v + 3u], view_grad[v + 4u], view_grad[v + 5u]));
     let g1 = wt(vec3<f32>(view_grad[v + 6u], view_grad[v + 7u], view_grad[v + 8u]));
     let g2 = wt(vec3<f32>(view_grad[v + 9u], view_grad[v + 10u], view_grad[v + 11u]));
@@ -50,17 +50,21 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         dot(g0, vec3<f32>(-2.0 * z, w, x)) + dot(g1, vec3<f32>(-w, -2.0 * z, y)) + dot(g2, vec3<f32>(x, y, 0.0)),
     );
     let dqn = (dq - qh * dot(qh, dq)) / norm;
-    grads[o + 3u] = dqn.x;
-    grads[o + 4u] = dqn.y;
-    grads[o + 5u] = dqn.z;
-    grads[o + 6u] = dqn.w;
-    grads[o + 7u] = view_grad[v + 12u] * exp(log_scale[2u * i]);
-    grads[o + 8u] = view_grad[v + 13u] * exp(log_scale[2u * i + 1u]);
-    grads[o + 9u] = view_grad[v + 14u];
-    grads[o + 10u] = view_grad[v + 15u];
-    grads[o + 11u] = view_grad[v + 16u];
-    grads[o + 12u] = view_grad[v + 17u];
+    let o = v;
+    view_grad[o] = dp.x;
+    view_grad[o + 1u] = dp.y;
+    view_grad[o + 2u] = dp.z;
+    view_grad[o + 3u] = dqn.x;
+    view_grad[o + 4u] = dqn.y;
+    view_grad[o + 5u] = dqn.z;
+    view_grad[o + 6u] = dqn.w;
+    view_grad[o + 7u] = view_grad[v + 12u] * exp(log_scale[2u * i]);
+    view_grad[o + 8u] = view_grad[v + 13u] * exp(log_scale[2u * i + 1u]);
+    view_grad[o + 9u] = view_grad[v + 14u];
+    view_grad[o + 10u] = view_grad[v + 15u];
+    view_grad[o + 11u] = view_grad[v + 16u];
+    view_grad[o + 12u] = view_grad[v + 17u];
     for (var j = 0u; j < ch; j++) {
-        grads[o + 13u + j] = view_grad[v + 18u + j];
+        view_grad[o + 13u + j] = view_grad[v + 18u + j];
     }
 }

@@ -1,5 +1,5 @@
 //! regularise: the per-surfel terms of the loss, added to the z gradient that
-//! `project_backward` wrote (slot 2 of `13 + channels` per surfel):
+//! `project_backward` wrote (slot 2 of each surfel's `stride` floats):
 //!   L_smooth = w_s Σ_{edges ij} (z_i − z_j)²        (grid neighbours, CSR)
 //!   L_traj   = w_t Σ_i q_i ρ(z_i − ẑ_i)             (ρ: Huber with width δ)
 //!   L_z      = w_z Σ_{i with LiDAR} (z_i − z_lidar,i)²

@@ -27,6 +27,7 @@ fn gpu_step_matches_the_oracles() {
         );
     }
     assert!(d.moved > 1e-3, "the step should change the parameters");
+    assert_eq!(d.applied, [true, true], "both updates are finite");
     assert!(
         d.params[0] < 1e-5 && d.params[1] < 1e-5,
         "Adam: {:?}",

@@ -8,6 +8,7 @@ use rogs::gpu::GpuContext;
 use rogs::optim::train::{TrainError, Trainer};
 use rogs::optim::TrainConfig;
 use rogs::reconstruct::{ReconstructConfig, Session};
+use rogs::render::{Params, ViewCamera};
 use rogs::synth::{generate, Preset, SynthConfig};
 
 fn ctx() -> GpuContext {
@@ -69,8 +70,7 @@ fn demo_reconstruction_beats_the_ipm_baseline_and_meets_measured_floors() {
     assert!(ply.1.starts_with(b"ply\nformat binary_little_endian 1.0"));
 }
 
-#[test]
-fn a_nan_stops_optimisation_and_keeps_the_last_good_model() {
+fn nan_test_trainer(cfg: &TrainConfig) -> (Trainer, Params<f32>, ViewCamera) {
     let (p, mut cam) = rogs::render::check::test_scene(3);
     cam.exposure = [0.0, 0.0];
     let reg = rogs::loss::regularise::RegData {
@@ -78,28 +78,64 @@ fn a_nan_stops_optimisation_and_keeps_the_last_good_model() {
         priors: vec![[0.0; 4]; p.len()],
         ..Default::default()
     };
+    let t = pollster::block_on(Trainer::new(ctx(), &p, &reg, 1, cfg, 10.0, 5)).expect("trainer");
+    (t, p, cam)
+}
+
+#[test]
+fn a_non_finite_update_is_refused_whole_and_stops_optimisation() {
+    // A NaN learning rate for one group: the whole step is refused, not just the group.
     let mut cfg = TrainConfig::default();
     cfg.lr.logits = f32::NAN;
-    let mut t =
-        pollster::block_on(Trainer::new(ctx(), &p, &reg, 1, &cfg, 10.0, 5)).expect("trainer");
+    let (mut t, p, cam) = nan_test_trainer(&cfg);
     let npx = (cam.width * cam.height) as usize;
     let target: Vec<u32> = vec![0x0080_8080; npx];
-    pollster::block_on(t.step(&cam, 0, &target, npx)).expect("the first loss is finite");
     let e = pollster::block_on(t.step(&cam, 0, &target, npx)).expect_err("NaN logits");
     assert!(
         matches!(
             e,
             TrainError::NonFinite {
-                step: 1,
-                good: 0,
-                ..
+                step: 0,
+                kept: 0,
+                what: "the update"
             }
         ),
         "{e}"
     );
     assert!(e.to_string().contains("kept"), "{e}");
     let kept = pollster::block_on(t.read_params()).expect("read");
-    assert_eq!(kept.logits, p.logits, "the model of step 0 is restored");
+    assert_eq!(kept.logits, p.logits, "no NaN reached the logits");
+    assert_eq!(
+        kept.rgb, p.rgb,
+        "the colours' finite update was refused too"
+    );
+    assert_eq!(kept.pos, p.pos);
+    let e = pollster::block_on(t.read_exposures()).expect("exposures");
+    assert_eq!(e, vec![[0.0, 0.0]]);
+}
+
+#[test]
+fn a_non_finite_loss_stops_optimisation_before_any_update() {
+    let mut cfg = TrainConfig::default();
+    cfg.loss.rgb = f32::NAN;
+    let (mut t, p, cam) = nan_test_trainer(&cfg);
+    let npx = (cam.width * cam.height) as usize;
+    let target: Vec<u32> = vec![0x0080_8080; npx];
+    let e = pollster::block_on(t.step(&cam, 0, &target, npx)).expect_err("NaN loss");
+    assert!(
+        matches!(
+            e,
+            TrainError::NonFinite {
+                step: 0,
+                kept: 0,
+                what: "the loss"
+            }
+        ),
+        "{e}"
+    );
+    let kept = pollster::block_on(t.read_params()).expect("read");
+    assert_eq!(kept.logits, p.logits);
+    assert_eq!(kept.pos, p.pos);
 }
 
 #[test]

@@ -92,6 +92,7 @@ async fn optimisation_step_matches_the_oracles_in_the_browser() {
         assert!(*rel < 2e-3, "{name}: GPU vs CPU gradient differs by {rel}");
     }
     assert!(d.moved > 1e-3);
+    assert_eq!(d.applied, [true, true], "both updates are finite");
     assert!(
         d.params[0] < 1e-5 && d.params[1] < 1e-5,
         "Adam: {:?}",

@@ -28,6 +28,22 @@ pub enum Bench {
         #[arg(long)]
         no_adaptive: bool,
     },
+    /// Optimisation steps of a bundle: wall time per step (median), GPU time per
+    /// kernel from timestamp queries where the adapter has them, the implied time per
+    /// epoch, and GPU bytes per surfel.
+    Step {
+        /// The scene bundle.
+        bundle: PathBuf,
+        /// Steps to time (after one warm-up step).
+        #[arg(long, default_value_t = 10)]
+        steps: usize,
+        /// Base grid resolution, metres.
+        #[arg(long, default_value_t = 0.05)]
+        resolution: f64,
+        /// Corridor half-width, metres.
+        #[arg(long, default_value_t = 8.0)]
+        half_width: f64,
+    },
     /// Grid, initialisation and refinement of a bundle: time per stage, surfel
     /// counts and bytes per surfel (median of the runs).
     Init {
@@ -60,6 +76,12 @@ pub fn run(b: Bench) -> Result<ExitCode, String> {
             resolution,
             no_adaptive,
         } => raster(&bundle, frame, view, runs, resolution, no_adaptive),
+        Bench::Step {
+            bundle,
+            steps,
+            resolution,
+            half_width,
+        } => super::bench_step::run(&bundle, steps, resolution, half_width),
         Bench::Init {
             bundle,
             runs,
@@ -159,6 +181,17 @@ fn raster(
         alpha: vec![0.0; npx],
     };
     let (mut fwd, mut both) = (Vec::new(), Vec::new());
+    let (mut gpu_fwd, mut gpu_both) = (Vec::new(), Vec::new());
+    let mut timer = crate::gpu::timing::PassTimer::install(&ctx);
+    // GPU seconds of the kernels recorded since the last call.
+    let gpu_time = |timer: &mut Option<crate::gpu::timing::PassTimer>| -> Result<f64, String> {
+        let Some(t) = timer.as_mut() else {
+            return Ok(0.0);
+        };
+        let before = t.total();
+        pollster::block_on(t.collect(&ctx)).map_err(|e| e.to_string())?;
+        Ok(t.total() - before)
+    };
     let mut pairs = 0;
     let mut evaluations = 0u64;
     for _ in 0..runs.max(1) {
@@ -167,16 +200,19 @@ fn raster(
         let _ = pollster::block_on(crate::gpu::readback::read_bytes(&ctx, &f.px, 4))
             .map_err(|e| e.to_string())?;
         fwd.push(t.elapsed().as_secs_f64());
+        gpu_fwd.push(gpu_time(&mut timer)?);
         let t = Instant::now();
         let f = pollster::block_on(r.forward(&ctx, &gp, &cam, &cull)).map_err(|e| e.to_string())?;
         pollster::block_on(r.backward(&ctx, &gp, &f, &grads)).map_err(|e| e.to_string())?;
         both.push(t.elapsed().as_secs_f64());
+        gpu_both.push(gpu_time(&mut timer)?);
         pairs = f.pairs;
         // Pixel×surfel pairs: every pair of a tile against the tile's pixels
         // (an upper bound on evaluations: early termination skips some).
         evaluations = pairs as u64 * (crate::render::TILE * crate::render::TILE) as u64;
     }
     let (tf, tb) = (median(fwd), median(both));
+    let (gf, gb) = (median(gpu_fwd), median(gpu_both));
     let out = serde_json::json!({
         "bench": "raster",
         "adapter": ctx.report.name,
@@ -190,6 +226,14 @@ fn raster(
         "forward_backward_s": tb,
         "forward_pairs_per_s": evaluations as f64 / tf,
         "forward_backward_pairs_per_s": evaluations as f64 / tb,
+        // Kernel time alone from GPU timestamps (null without TIMESTAMP_QUERY).
+        "gpu_timestamps": timer.as_ref().map(|t| serde_json::json!({
+            "forward_s": gf,
+            "forward_backward_s": gb,
+            "forward_pairs_per_s": evaluations as f64 / gf,
+            "forward_backward_pairs_per_s": evaluations as f64 / gb,
+            "kernels_s_total": t.sorted(),
+        })),
         "runs": runs,
     });
     println!(

@@ -1,6 +1,7 @@
 //! The native command line: `rogs <command>`. Each command lives in its own file.
 
 mod bench;
+mod bench_step;
 mod eval;
 mod example;
 mod gpu;

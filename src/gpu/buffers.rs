@@ -51,7 +51,8 @@ pub fn pipeline(
     entry: &str,
 ) -> wgpu::ComputePipeline {
     let module = ctx.shader(label, parts);
-    ctx.device
+    let p = ctx
+        .device
         .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some(label),
             layout: None,
@@ -59,7 +60,9 @@ pub fn pipeline(
             entry_point: Some(entry),
             compilation_options: Default::default(),
             cache: None,
-        })
+        });
+    super::timing::name(&p, label);
+    p
 }
 
 /// A bind group for group 0 of `p` from (binding, buffer) pairs.
@@ -89,7 +92,8 @@ pub fn dispatch(
     bg: &wgpu::BindGroup,
     groups: (u32, u32, u32),
 ) {
-    let mut pass = enc.begin_compute_pass(&Default::default());
+    let slot = super::timing::pass_slot(p);
+    let mut pass = enc.begin_compute_pass(&super::timing::pass_descriptor(&slot));
     pass.set_pipeline(p);
     pass.set_bind_group(0, bg, &[]);
     pass.dispatch_workgroups(groups.0, groups.1, groups.2);

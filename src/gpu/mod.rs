@@ -9,6 +9,7 @@ pub mod buffers;
 pub mod radix_sort;
 pub mod readback;
 pub mod scatter_add;
+pub mod timing;
 
 use serde::Serialize;
 use thiserror::Error;

@@ -295,10 +295,8 @@ impl RadixSorter {
         let (bx, by) = ctx.dispatch_2d(blocks);
         let tiles = (RADIX * blocks).div_ceil(SCAN_BLOCK);
         let (tx, ty) = ctx.dispatch_2d(tiles);
-        let mut cpass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("radix_sort"),
-            timestamp_writes: None,
-        });
+        let slot = super::timing::labelled_slot("radix_sort");
+        let mut cpass = encoder.begin_compute_pass(&super::timing::pass_descriptor(&slot));
         for pass in 0..passes {
             let bits = (key_bits - pass * BITS_PER_PASS).min(BITS_PER_PASS);
             let offset = param_slot(pass, bits) * self.param_stride;

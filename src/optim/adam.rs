@@ -1,5 +1,6 @@
 //! Oracle of `shaders/adam.wgsl` and the learning rates: one Adam step of every
-//! learnable surfel parameter (x, y fixed) and of one camera's exposure.
+//! learnable surfel parameter (x, y fixed, so without moments) and of one camera's
+//! exposure, applied only when every new value is finite.
 
 use crate::render::Params;
 use serde::Serialize;
@@ -92,46 +93,98 @@ impl StepConstants {
     }
 }
 
-fn adam(c: &StepConstants, m: &mut [f32], g: f32, lr: f32) -> f32 {
+/// Learnable slots per surfel (z, rotation 4, log-scales 2, opacity, rgb 3, logits):
+/// the moments hold m and v for each, interleaved.
+pub fn learnable(channels: usize) -> usize {
+    11 + channels
+}
+
+fn adam(c: &StepConstants, m: &mut [f32], value: f32, g: f32, lr: f32) -> f32 {
     let mm = c.beta1 * m[0] + (1.0 - c.beta1) * g;
     let v = c.beta2 * m[1] + (1.0 - c.beta2) * g * g;
     m[0] = mm;
     m[1] = v;
-    -lr * (mm / c.bias1) / ((v / c.bias2).sqrt() + c.eps)
+    value - lr * (mm / c.bias1) / ((v / c.bias2).sqrt() + c.eps)
 }
 
-/// One step of every surfel parameter in `p` from gradients `g` (same layout);
-/// `moments` holds m, v interleaved per packed slot (`2 (13 + channels)` per surfel).
-pub fn step(p: &mut Params<f32>, g: &Params<f32>, moments: &mut [f32], c: &StepConstants) {
+/// One camera's exposure (a, b), its gradient and its 4 moments.
+pub struct Exposure<'a> {
+    pub value: &'a mut [f32; 2],
+    pub grad: [f32; 2],
+    pub moments: &'a mut [f32; 4],
+}
+
+/// One step of every surfel parameter in `p` from gradients `g` (same layout) and of
+/// the view's exposure; `moments` holds m, v interleaved per learnable slot
+/// (`2 learnable(channels)` per surfel). All or nothing: when any new value or moment
+/// would not be finite, nothing changes and the result is false.
+pub fn step(
+    p: &mut Params<f32>,
+    g: &Params<f32>,
+    moments: &mut [f32],
+    e: Exposure,
+    c: &StepConstants,
+) -> bool {
     let ch = p.channels;
-    let stride = 13 + ch;
+    let stride = 2 * learnable(ch);
+    let mut q = p.clone();
+    let mut mo = moments.to_vec();
     for i in 0..p.len() {
-        let m = &mut moments[2 * stride * i..2 * stride * (i + 1)];
-        p.pos[i][2] += adam(c, &mut m[4..6], g.pos[i][2], c.lr_z);
+        let m = &mut mo[stride * i..stride * (i + 1)];
+        q.pos[i][2] = adam(c, &mut m[0..2], q.pos[i][2], g.pos[i][2], c.lr_z);
         for k in 0..4 {
-            let s = 2 * (3 + k);
-            p.rotation[i][k] += adam(c, &mut m[s..s + 2], g.rotation[i][k], c.lr_rotation);
+            let s = 2 * (1 + k);
+            let r = &mut q.rotation[i][k];
+            *r = adam(c, &mut m[s..s + 2], *r, g.rotation[i][k], c.lr_rotation);
         }
         for k in 0..2 {
-            let s = 2 * (7 + k);
-            p.log_scale[i][k] += adam(c, &mut m[s..s + 2], g.log_scale[i][k], c.lr_scale);
+            let s = 2 * (5 + k);
+            let l = &mut q.log_scale[i][k];
+            *l = adam(c, &mut m[s..s + 2], *l, g.log_scale[i][k], c.lr_scale);
         }
-        p.opacity[i] += adam(c, &mut m[18..20], g.opacity[i], c.lr_opacity);
+        q.opacity[i] = adam(c, &mut m[14..16], q.opacity[i], g.opacity[i], c.lr_opacity);
         for k in 0..3 {
-            let s = 2 * (10 + k);
-            let v = p.rgb[i][k] + adam(c, &mut m[s..s + 2], g.rgb[i][k], c.lr_rgb);
-            p.rgb[i][k] = v.clamp(0.0, 1.0);
+            let s = 2 * (8 + k);
+            // Unclamped here so that a NaN is seen; clamped once found finite.
+            q.rgb[i][k] = adam(c, &mut m[s..s + 2], q.rgb[i][k], g.rgb[i][k], c.lr_rgb);
         }
-        for q in 0..ch {
-            let s = 2 * (13 + q);
-            p.logits[ch * i + q] += adam(c, &mut m[s..s + 2], g.logits[ch * i + q], c.lr_logits);
+        for j in 0..ch {
+            let s = 2 * (11 + j);
+            let l = &mut q.logits[ch * i + j];
+            *l = adam(c, &mut m[s..s + 2], *l, g.logits[ch * i + j], c.lr_logits);
         }
     }
-}
-
-/// One step of a camera's exposure (a, b); `m` holds its 4 moments.
-pub fn step_exposure(e: &mut [f32; 2], g: [f32; 2], m: &mut [f32; 4], c: &StepConstants) {
+    let mut ev = *e.value;
+    let mut em = *e.moments;
     for k in 0..2 {
-        e[k] += adam(c, &mut m[2 * k..2 * k + 2], g[k], c.lr_exposure);
+        ev[k] = adam(
+            c,
+            &mut em[2 * k..2 * k + 2],
+            ev[k],
+            e.grad[k],
+            c.lr_exposure,
+        );
     }
+    let values = q.pos.iter().map(|v| v[2]);
+    let values = values
+        .chain(q.rotation.iter().flatten().copied())
+        .chain(q.log_scale.iter().flatten().copied())
+        .chain(q.opacity.iter().copied())
+        .chain(q.rgb.iter().flatten().copied())
+        .chain(q.logits.iter().copied());
+    let all_finite = values
+        .chain(mo.iter().copied())
+        .chain(ev)
+        .chain(em)
+        .all(f32::is_finite);
+    if all_finite {
+        for c in q.rgb.iter_mut().flatten() {
+            *c = c.clamp(0.0, 1.0);
+        }
+        *p = q;
+        moments.copy_from_slice(&mo);
+        *e.value = ev;
+        *e.moments = em;
+    }
+    all_finite
 }

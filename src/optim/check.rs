@@ -5,7 +5,7 @@
 //! normalisation turns a 1e-7 gradient difference into a full step, so the update is
 //! checked from identical gradients), over two steps so that the moments matter.
 
-use super::adam::{step, step_exposure, StepConstants};
+use super::adam::{learnable, step, Exposure, StepConstants};
 use super::train::Trainer;
 use super::TrainConfig;
 use crate::gpu::{GpuContext, GpuError};
@@ -28,6 +28,8 @@ pub struct StepDifferences {
     pub exposure: f32,
     /// Largest parameter change of step 1 (so that a no-op step cannot pass).
     pub moved: f32,
+    /// Whether the CPU Adam applied steps 1 and 2 (it refuses non-finite updates).
+    pub applied: [bool; 2],
 }
 
 fn flat(p: &Params<f32>) -> Vec<f32> {
@@ -150,13 +152,17 @@ pub async fn compare_step(ctx: GpuContext) -> Result<StepDifferences, GpuError> 
     ];
     // Adam from the GPU's gradients, two steps.
     let lr = &cfg.lr;
-    let mut moments = vec![0.0f32; 2 * (13 + ch) * n];
+    let mut moments = vec![0.0f32; 2 * learnable(ch) * n];
     let mut em = [0.0f32; 4];
     let mut exposure = [0.0f32; 2];
     let mut cpu = p0.clone();
     let c1 = StepConstants::new(lr, lr.z_at(0, 4, extent), 1);
-    step(&mut cpu, &g1, &mut moments, &c1);
-    step_exposure(&mut exposure, e1, &mut em, &c1);
+    let e = Exposure {
+        value: &mut exposure,
+        grad: e1,
+        moments: &mut em,
+    };
+    out.applied[0] = step(&mut cpu, &g1, &mut moments, e, &c1);
     let p1 = t.read_params().await?;
     out.params[0] = max_abs(&flat(&p1), &flat(&cpu));
     out.moved = max_abs(&flat(&p1), &flat(&p0));
@@ -166,8 +172,12 @@ pub async fn compare_step(ctx: GpuContext) -> Result<StepDifferences, GpuError> 
         .map_err(|e| GpuError::Validation(e.to_string()))?;
     let (g2, e2) = t.read_grads().await?;
     let c2 = StepConstants::new(lr, lr.z_at(1, 4, extent), 2);
-    step(&mut cpu, &g2, &mut moments, &c2);
-    step_exposure(&mut exposure, e2, &mut em, &c2);
+    let e = Exposure {
+        value: &mut exposure,
+        grad: e2,
+        moments: &mut em,
+    };
+    out.applied[1] = step(&mut cpu, &g2, &mut moments, e, &c2);
     let p2 = t.read_params().await?;
     out.params[1] = max_abs(&flat(&p2), &flat(&cpu));
     let e = t.read_exposures().await?;

@@ -28,8 +28,6 @@ pub struct TrainConfig {
     pub holdout_every: Option<usize>,
     /// Stop after this many steps (benchmarks: time a part of an epoch).
     pub max_steps: Option<usize>,
-    /// Steps between snapshots of the parameters (restored if the loss turns NaN).
-    pub snapshot_every: usize,
 }
 
 impl Default for TrainConfig {
@@ -42,7 +40,6 @@ impl Default for TrainConfig {
             cull: CullConfig::default(),
             use_lidar: true,
             holdout_every: None,
-            snapshot_every: 10,
             max_steps: None,
         }
     }

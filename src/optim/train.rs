@@ -4,11 +4,13 @@
 //! rasteriser's pair count and a few kilobytes of loss partial sums.
 //!
 //! Step: `forward` → `loss` (per-pixel gradients) → read the loss; if it is not
-//! finite, restore the last snapshot and stop → every `snapshot_every` steps copy the
-//! parameters aside → `rasterize_backward` + `project_backward` → `regularise` →
-//! `adam` (surfels) and `step_exposure` (this view's camera).
+//! finite, stop → `rasterize_backward` + `project_backward` (parameter gradients in
+//! place in the view gradients) → `regularise` → `adam`'s `check` (is every new value
+//! finite?) → `adam` (surfels) and `step_exposure` (this view's camera), which apply
+//! the update only when it is. Either way a NaN never reaches the model, so the last
+//! good model is the current one and no copy of it is kept.
 
-use super::adam::StepConstants;
+use super::adam::{learnable, StepConstants};
 use super::TrainConfig;
 use crate::gpu::buffers::{bind, bytes_of, dispatch, init_storage, pipeline, storage, uniform};
 use crate::gpu::readback::read_f32;
@@ -24,13 +26,15 @@ pub enum TrainError {
     #[error(transparent)]
     Gpu(#[from] GpuError),
     #[error(
-        "the loss became {value} at step {step}; optimisation stopped and the model of step \
-         {good} was kept. Try a smaller z learning rate or check the bundle's poses"
+        "{what} was not finite at step {step}; optimisation stopped and the model after \
+         {kept} steps was kept. Try a smaller z learning rate or check the bundle's poses"
     )]
     NonFinite {
         step: usize,
-        good: usize,
-        value: f64,
+        /// Steps whose updates the kept model holds.
+        kept: usize,
+        /// "the loss" or "the update".
+        what: &'static str,
     },
 }
 
@@ -53,6 +57,7 @@ impl StepLoss {
 struct Kernels {
     loss: wgpu::ComputePipeline,
     regularise: wgpu::ComputePipeline,
+    adam_check: wgpu::ComputePipeline,
     adam: wgpu::ComputePipeline,
     exposure: wgpu::ComputePipeline,
 }
@@ -62,12 +67,11 @@ pub struct Trainer {
     pub raster: GpuRasterizer,
     k: Kernels,
     pub params: GpuParams,
-    snapshot: GpuParams,
-    /// Step whose parameters the snapshot holds.
-    snapshot_step: usize,
-    grads: wgpu::Buffer,
     moments: wgpu::Buffer,
+    /// View gradients, and the parameter gradients `project_backward` leaves in place.
     view_grad: wgpu::Buffer,
+    /// Non-zero when `adam` refused the step's update.
+    status: wgpu::Buffer,
     adj_start: wgpu::Buffer,
     adj: wgpu::Buffer,
     priors: wgpu::Buffer,
@@ -82,25 +86,12 @@ pub struct Trainer {
     pub steps_done: usize,
 }
 
-fn copy_params(enc: &mut wgpu::CommandEncoder, from: &GpuParams, to: &GpuParams) {
-    for (a, b) in [
-        (&from.pos, &to.pos),
-        (&from.rotation, &to.rotation),
-        (&from.log_scale, &to.log_scale),
-        (&from.opacity, &to.opacity),
-        (&from.rgb, &to.rgb),
-        (&from.logits, &to.logits),
-    ] {
-        enc.copy_buffer_to_buffer(a, 0, b, 0, a.size());
-    }
-}
-
 /// Every per-surfel buffer is bound whole, so the largest (the Adam moments,
-/// 2 (13 + channels) floats per surfel, or the projected surfels, 24) must fit the
-/// adapter's storage binding. Splitting the model into chunks is not done yet: until
+/// 2 (11 + channels) floats per surfel, the view gradients, 18 + channels, or the
+/// projected surfels, 24) must fit the adapter's storage binding. Splitting the model into chunks is not done yet: until
 /// then a model that does not fit is refused with what to change.
 pub fn check_fits(ctx: &GpuContext, surfels: usize, channels: usize) -> Result<(), GpuError> {
-    let per = 4 * (2 * (13 + channels)).max(24).max(VIEW_GRAD + channels) as u64;
+    let per = 4 * (2 * learnable(channels)).max(24).max(VIEW_GRAD + channels) as u64;
     let limit = ctx.limits.max_storage_buffer_binding_size;
     let need = per * surfels as u64;
     if need > limit {
@@ -148,16 +139,16 @@ impl Trainer {
                 &[include_str!("../../shaders/regularise.wgsl")],
                 "main",
             ),
+            adam_check: pipeline(&ctx, "adam_check", &[adam_src], "check"),
             adam: pipeline(&ctx, "adam", &[adam_src], "main"),
             exposure: pipeline(&ctx, "adam_exposure", &[adam_src], "step_exposure"),
         };
         let n = p.len() as u64;
-        let stride = 13 + p.channels as u64;
+        let slots = learnable(p.channels) as u64;
         let params = GpuRasterizer::upload(&ctx, p);
-        let snapshot = GpuRasterizer::upload(&ctx, p);
         let me = Self {
-            grads: storage(&ctx, "grads", 4 * stride * n),
-            moments: storage(&ctx, "moments", 4 * (2 * stride * n + 4 * cameras as u64)),
+            moments: storage(&ctx, "moments", 4 * (2 * slots * n + 4 * cameras as u64)),
+            status: storage(&ctx, "adam_status", 4),
             view_grad: storage(
                 &ctx,
                 "view_grad",
@@ -173,11 +164,9 @@ impl Trainer {
             extent,
             total_steps: total_steps.max(1),
             steps_done: 0,
-            snapshot_step: 0,
             raster,
             k,
             params,
-            snapshot,
             ctx,
         };
         if let Some(e) = scope.pop().await {
@@ -186,8 +175,8 @@ impl Trainer {
         Ok(me)
     }
 
-    /// GPU bytes held per surfel between steps: parameters, snapshot, gradients, Adam
-    /// moments, view gradients, neighbour lists and priors.
+    /// GPU bytes held per surfel between steps: parameters, Adam moments, view
+    /// gradients (which hold the parameter gradients too), neighbour lists and priors.
     pub fn bytes_per_surfel(&self) -> f64 {
         let n = self.params.count.max(1) as f64;
         let p = &self.params;
@@ -203,7 +192,6 @@ impl Trainer {
         .map(|b| b.size())
         .sum();
         let rest: u64 = [
-            &self.grads,
             &self.moments,
             &self.view_grad,
             &self.adj_start,
@@ -213,7 +201,7 @@ impl Trainer {
         .iter()
         .map(|b| b.size())
         .sum();
-        (2 * params + rest) as f64 / n
+        (params + rest) as f64 / n
     }
 
     /// One optimisation step on view `cam` of camera `camera` with its packed target
@@ -280,20 +268,13 @@ impl Trainer {
         }
         let step = self.steps_done;
         if !loss.total().is_finite() {
-            let mut enc = ctx.device.create_command_encoder(&Default::default());
-            copy_params(&mut enc, &self.snapshot, &self.params);
-            ctx.queue.submit([enc.finish()]);
             return Err(TrainError::NonFinite {
                 step,
-                good: self.snapshot_step,
-                value: loss.total(),
+                kept: step,
+                what: "the loss",
             });
         }
         let mut enc = ctx.device.create_command_encoder(&Default::default());
-        if step.is_multiple_of(self.cfg.snapshot_every.max(1)) {
-            copy_params(&mut enc, &self.params, &self.snapshot);
-            self.snapshot_step = step;
-        }
         self.raster.encode_backward(
             ctx,
             &mut enc,
@@ -302,10 +283,9 @@ impl Trainer {
             &g_px,
             &g_logits,
             &self.view_grad,
-            &self.grads,
         );
         let n = self.params.count;
-        let stride = 13 + ch;
+        let stride = VIEW_GRAD as u32 + ch;
         let (sg, srow) = grid_1d(ctx, n);
         let w = &self.reg;
         let rp: [u32; 8] = [
@@ -320,7 +300,8 @@ impl Trainer {
         ];
         let rp = uniform(ctx, "reg_params", bytes_of(&rp));
         let swgs = (sg.0 * sg.1) as usize;
-        let reg_partial = storage(ctx, "reg_partial", 12 * swgs as u64);
+        // The regulariser's partial sums, then adam's status word.
+        let reg_partial = storage(ctx, "reg_partial", 4 * (3 * swgs as u64 + 1));
         let bg = bind(
             ctx,
             &self.k.regularise,
@@ -330,7 +311,7 @@ impl Trainer {
                 (2, &self.adj_start),
                 (3, &self.adj),
                 (4, &self.priors),
-                (5, &self.grads),
+                (5, &self.view_grad),
                 (6, &reg_partial),
             ],
         );
@@ -358,45 +339,53 @@ impl Trainer {
             c.eps.to_bits(),
             c.bias1.to_bits(),
             c.bias2.to_bits(),
-            (VIEW_GRAD as u32 + ch) * n,
-            0,
+            stride * n,
+            ch,
             0,
             0,
         ];
         let au = uniform(ctx, "adam_params", bytes_of(&au));
         let p = &self.params;
-        let bg = bind(
-            ctx,
-            &self.k.adam,
-            &[
-                (0, &au),
-                (1, &self.grads),
-                (2, &self.moments),
-                (3, &p.pos),
-                (4, &p.rotation),
-                (5, &p.log_scale),
-                (6, &p.opacity),
-                (7, &p.rgb),
-                (8, &p.logits),
-            ],
+        let all = [
+            (0, &au),
+            (1, &self.view_grad),
+            (2, &self.moments),
+            (3, &p.pos),
+            (4, &p.rotation),
+            (5, &p.log_scale),
+            (6, &p.opacity),
+            (7, &p.rgb),
+            (8, &p.logits),
+            (9, &self.exposure),
+            (10, &self.status),
+        ];
+        enc.clear_buffer(&self.status, 0, None);
+        let k = &self.k.adam_check;
+        dispatch(&mut enc, k, &bind(ctx, k, &all), sg);
+        // Auto layouts hold only what an entry uses: `main` leaves the exposure alone.
+        let k = &self.k.adam;
+        dispatch(
+            &mut enc,
+            k,
+            &bind(ctx, k, &[&all[..9], &all[10..]].concat()),
+            sg,
         );
-        dispatch(&mut enc, &self.k.adam, &bg, sg);
-        let bg = bind(
-            ctx,
-            &self.k.exposure,
-            &[
-                (0, &au),
-                (2, &self.moments),
-                (9, &self.view_grad),
-                (10, &self.exposure),
-            ],
-        );
-        dispatch(&mut enc, &self.k.exposure, &bg, (1, 1, 1));
+        let e = &self.k.exposure;
+        let bg = bind(ctx, e, &[all[0], all[1], all[2], all[9], all[10]]);
+        dispatch(&mut enc, e, &bg, (1, 1, 1));
+        enc.copy_buffer_to_buffer(&self.status, 0, &reg_partial, 12 * swgs as u64, 4);
         ctx.queue.submit([enc.finish()]);
-        let sums = read_f32(ctx, &reg_partial, 3 * swgs).await?;
+        let sums = read_f32(ctx, &reg_partial, 3 * swgs + 1).await?;
         // Out of memory or a lost device: stop with the words rather than train on.
         ctx.check()?;
-        for s in sums.chunks_exact(3) {
+        if sums[3 * swgs].to_bits() != 0 {
+            return Err(TrainError::NonFinite {
+                step,
+                kept: step,
+                what: "the update",
+            });
+        }
+        for s in sums[..3 * swgs].chunks_exact(3) {
             loss.smooth += s[0] as f64;
             loss.traj += s[1] as f64;
             loss.lidar += s[2] as f64;
@@ -410,10 +399,8 @@ impl Trainer {
     pub async fn read_grads(&self) -> Result<(Params<f32>, [f32; 2]), GpuError> {
         let n = self.params.count as usize;
         let ch = self.params.channels as usize;
-        let flat = read_f32(&self.ctx, &self.grads, (13 + ch) * n).await?;
-        let vg = read_f32(&self.ctx, &self.view_grad, (VIEW_GRAD + ch) * n + 2).await?;
-        let e = [vg[vg.len() - 2], vg[vg.len() - 1]];
-        Ok((crate::render::gpu::unpack_grads(&flat, ch), e))
+        let flat = read_f32(&self.ctx, &self.view_grad, (VIEW_GRAD + ch) * n + 2).await?;
+        Ok(crate::render::gpu::unpack_grads(&flat, ch))
     }
 
     /// The current parameters, read back.

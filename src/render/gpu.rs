@@ -378,10 +378,11 @@ impl GpuRasterizer {
     }
 
     /// Records the backward pass: per-pixel loss gradients `g_px` (GRAD_STRIDE per
-    /// pixel: rgb 3, depth, alpha) and `g_logits` to parameter gradients in `grads`
-    /// (`13 + channels` per surfel: position 3, rotation 4, log-scales 2, opacity, rgb
-    /// 3, logits), through `view_grad` (`VIEW_GRAD + channels` per surfel, then the
-    /// exposure gradient d/da, d/db), which this clears first.
+    /// pixel: rgb 3, depth, alpha) and `g_logits` to `view_grad`, which this clears
+    /// first: `VIEW_GRAD + channels` floats per surfel, then the exposure gradient
+    /// d/da, d/db. `project_backward` leaves each surfel's parameter gradients at the
+    /// head of its slot (`13 + channels`: position 3, rotation 4, log-scales 2,
+    /// opacity, rgb 3, logits; `unpack_grads`).
     #[allow(clippy::too_many_arguments)]
     pub fn encode_backward(
         &self,
@@ -392,7 +393,6 @@ impl GpuRasterizer {
         g_px: &wgpu::Buffer,
         g_logits: &wgpu::Buffer,
         view_grad: &wgpu::Buffer,
-        grads: &wgpu::Buffer,
     ) {
         let n = p.count;
         let npx = (f.width * f.height) as u64;
@@ -431,7 +431,6 @@ impl GpuRasterizer {
                 (1, view_grad),
                 (2, &p.rotation),
                 (3, &p.log_scale),
-                (4, grads),
                 (5, &grid),
             ],
         );
@@ -465,26 +464,24 @@ impl GpuRasterizer {
         let g_px = init_storage(ctx, "g_px", bytemuck::cast_slice(&packed));
         let g_logits = init_storage(ctx, "g_logits", bytemuck::cast_slice(&g.logits));
         let view_grad = storage(ctx, "view_grad", 4 * (stride * n + 2) as u64);
-        let out_stride = 13 + ch;
-        let grads = storage(ctx, "grads", 4 * (out_stride * n) as u64);
         let mut enc = ctx.device.create_command_encoder(&Default::default());
-        self.encode_backward(ctx, &mut enc, p, f, &g_px, &g_logits, &view_grad, &grads);
+        self.encode_backward(ctx, &mut enc, p, f, &g_px, &g_logits, &view_grad);
         ctx.queue.submit([enc.finish()]);
-        let flat = read_f32(ctx, &grads, out_stride * n).await?;
-        let tail = read_bytes(ctx, &view_grad, 4 * (stride * n + 2) as u64).await?;
-        let e: Vec<f32> = bytemuck::pod_collect_to_vec(&tail[4 * stride * n..]);
-        Ok((unpack_grads(&flat, ch), [e[0], e[1]]))
+        let flat = read_f32(ctx, &view_grad, stride * n + 2).await?;
+        Ok(unpack_grads(&flat, ch))
     }
 }
 
-/// Splits packed per-surfel parameter gradients (`13 + channels` each) into `Params`.
-pub fn unpack_grads(flat: &[f32], ch: usize) -> Params<f32> {
-    let out_stride = 13 + ch;
+/// Splits the backward pass's `view_grad` buffer, read whole, into the parameter
+/// gradients (`Params` layout) and the exposure gradient (d/da, d/db).
+pub fn unpack_grads(flat: &[f32], ch: usize) -> (Params<f32>, [f32; 2]) {
+    let stride = VIEW_GRAD + ch;
+    let n = flat.len().saturating_sub(2) / stride;
     let mut out = Params {
         channels: ch,
         ..Default::default()
     };
-    for s in flat.chunks_exact(out_stride) {
+    for s in flat[..n * stride].chunks_exact(stride) {
         out.pos.push([s[0], s[1], s[2]]);
         out.rotation.push([s[3], s[4], s[5], s[6]]);
         out.log_scale.push([s[7], s[8]]);
@@ -492,5 +489,6 @@ pub fn unpack_grads(flat: &[f32], ch: usize) -> Params<f32> {
         out.rgb.push([s[10], s[11], s[12]]);
         out.logits.extend_from_slice(&s[13..13 + ch]);
     }
-    out
+    let e = [flat[n * stride], flat[n * stride + 1]];
+    (out, e)
 }

@@ -1,0 +1,75 @@
+//! `rogs bench step`: optimisation steps of a bundle, timed per kernel.
+//!
+//! Wall time per step (median), the GPU time of every kernel per step from timestamp
+//! queries (`gpu::timing`, where the adapter has them), the epoch it implies, and the
+//! GPU bytes held per surfel.
+
+use crate::bundle::{Bundle, Limits};
+use crate::gpu::timing::PassTimer;
+use crate::gpu::GpuContext;
+use crate::reconstruct::{ReconstructConfig, Session};
+use std::path::Path;
+use std::process::ExitCode;
+use std::time::Instant;
+
+pub fn run(
+    bundle: &Path,
+    steps: usize,
+    resolution: f64,
+    half_width: f64,
+) -> Result<ExitCode, String> {
+    let b = Bundle::open(bundle, Limits::default(), &mut |_, _| {}).map_err(|e| e.to_string())?;
+    let mut cfg = ReconstructConfig::default();
+    cfg.prepare.grid.resolution = resolution;
+    cfg.prepare.grid.half_width = half_width;
+    // One warm-up step (first use of every pipeline and buffer size), then the timed ones.
+    cfg.train.max_steps = Some(steps.max(1) + 1);
+    let ctx = GpuContext::new_blocking().map_err(|e| e.to_string())?;
+    let mut s = pollster::block_on(Session::new(&b, cfg, ctx)).map_err(|e| e.to_string())?;
+    pollster::block_on(s.step(&b)).map_err(|e| e.to_string())?;
+    let mut timer = PassTimer::install(&s.trainer.ctx);
+    let mut wall = Vec::new();
+    while !s.is_done() {
+        let t = Instant::now();
+        pollster::block_on(s.step(&b)).map_err(|e| e.to_string())?;
+        wall.push(t.elapsed().as_secs_f64());
+        if let Some(timer) = timer.as_mut() {
+            pollster::block_on(timer.collect(&s.trainer.ctx)).map_err(|e| e.to_string())?;
+        }
+    }
+    let n = wall.len().max(1) as f64;
+    wall.sort_by(f64::total_cmp);
+    let median = wall[wall.len() / 2];
+    let kernels: Vec<serde_json::Value> = timer
+        .as_ref()
+        .map(|t| t.sorted())
+        .unwrap_or_default()
+        .into_iter()
+        .map(|(k, sec, passes)| {
+            serde_json::json!({"kernel": k, "ms_per_step": 1e3 * sec / n, "passes_per_step": passes as f64 / n})
+        })
+        .collect();
+    let gpu_ms: f64 = kernels
+        .iter()
+        .filter_map(|k| k["ms_per_step"].as_f64())
+        .sum();
+    let views = s.train_views.len();
+    let out = serde_json::json!({
+        "bench": "step",
+        "bundle": bundle.display().to_string(),
+        "adapter": s.trainer.ctx.report.name,
+        "surfels": s.prepare_report.surfels,
+        "training_views": views,
+        "steps_timed": wall.len(),
+        "seconds_per_step": median,
+        "seconds_per_epoch": median * views as f64,
+        "gpu_kernel_ms_per_step": if timer.is_some() { serde_json::json!(gpu_ms) } else { serde_json::Value::Null },
+        "kernels": kernels,
+        "bytes_per_surfel_gpu": s.bytes_per_surfel_gpu,
+    });
+    println!(
+        "{}",
+        serde_json::to_string_pretty(&out).map_err(|e| e.to_string())?
+    );
+    Ok(ExitCode::SUCCESS)
+}

@@ -10,13 +10,25 @@
 //! lands on is written (slot k + 5 is read before slot k is written; logits move
 //! down by 5 in increasing order), so no other invocation or ordering is involved.
 //!
+//! Any gradient that is not `usable` (guard.wgsl), the surfel's or (invocation 0) the
+//! exposure's, raises `status`, and `adam` then applies nothing.
+//!
 //! Oracle: src/render/project_backward.rs.
 
 @group(0) @binding(0) var<uniform> view: View;
 @group(0) @binding(1) var<storage, read_write> view_grad: array<f32>;
 @group(0) @binding(2) var<storage, read> rotation: array<f32>;
 @group(0) @binding(3) var<storage, read> log_scale: array<f32>;
+@group(0) @binding(4) var<storage, read_write> status: array<u32>;
 @group(0) @binding(5) var<uniform> grid: vec4<u32>;
+
+var<private> ok: bool;
+
+/// Writes one parameter gradient and notes whether it is usable.
+fn put(at: u32, g: f32) {
+    view_grad[at] = g;
+    ok = ok & usable(g);
+}
 
 fn wt(v: vec3<f32>) -> vec3<f32> {
     return view.w2c0.xyz * v.x + view.w2c1.xyz * v.y + view.w2c2.xyz * v.z;
@@ -51,20 +63,28 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     );
     let dqn = (dq - qh * dot(qh, dq)) / norm;
     let o = v;
-    view_grad[o] = dp.x;
-    view_grad[o + 1u] = dp.y;
-    view_grad[o + 2u] = dp.z;
-    view_grad[o + 3u] = dqn.x;
-    view_grad[o + 4u] = dqn.y;
-    view_grad[o + 5u] = dqn.z;
-    view_grad[o + 6u] = dqn.w;
-    view_grad[o + 7u] = view_grad[v + 12u] * exp(log_scale[2u * i]);
-    view_grad[o + 8u] = view_grad[v + 13u] * exp(log_scale[2u * i + 1u]);
-    view_grad[o + 9u] = view_grad[v + 14u];
-    view_grad[o + 10u] = view_grad[v + 15u];
-    view_grad[o + 11u] = view_grad[v + 16u];
-    view_grad[o + 12u] = view_grad[v + 17u];
+    ok = true;
+    put(o, dp.x);
+    put(o + 1u, dp.y);
+    put(o + 2u, dp.z);
+    put(o + 3u, dqn.x);
+    put(o + 4u, dqn.y);
+    put(o + 5u, dqn.z);
+    put(o + 6u, dqn.w);
+    put(o + 7u, view_grad[v + 12u] * exp(log_scale[2u * i]));
+    put(o + 8u, view_grad[v + 13u] * exp(log_scale[2u * i + 1u]));
+    put(o + 9u, view_grad[v + 14u]);
+    put(o + 10u, view_grad[v + 15u]);
+    put(o + 11u, view_grad[v + 16u]);
+    put(o + 12u, view_grad[v + 17u]);
     for (var j = 0u; j < ch; j++) {
-        view_grad[o + 13u + j] = view_grad[v + 18u + j];
+        put(o + 13u + j, view_grad[v + 18u + j]);
+    }
+    if i == 0u {
+        let e = vs * view.count;
+        ok = ok & usable(view_grad[e]) & usable(view_grad[e + 1u]);
+    }
+    if !ok {
+        status[0] = 1u;
     }
 }

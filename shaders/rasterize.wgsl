@@ -9,6 +9,12 @@
 //! memory behind barriers gained nothing over reading storage directly. Logits have a
 //! runtime channel count, so they accumulate in the output buffer, not in registers.
 //!
+//! With `view.masked` (training), pixels outside the loss mask (class 255 in the packed
+//! target) composite nothing: the loss ignores them, so their outputs and gradients
+//! are not needed, and they are often the sky and far pixels that walk a whole list.
+//! Their outputs read as empty (alpha 0, no last contributor), so the backward pass
+//! walks nothing for them either. The loss, and so every gradient, is unchanged.
+//!
 //! Oracle: src/render/rasterize.rs.
 
 @group(0) @binding(0) var<uniform> view: View;
@@ -22,6 +28,8 @@
 // contributor (u32 bits), colour before exposure 3.
 @group(0) @binding(6) var<storage, read_write> px_out: array<f32>;
 @group(0) @binding(7) var<storage, read_write> out_logits: array<f32>;
+// The packed training target (class in the top byte); read only when `view.masked`.
+@group(0) @binding(8) var<storage, read> target_px: array<u32>;
 
 var<workgroup> range: vec2<u32>;
 
@@ -48,7 +56,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
     var c = vec3<f32>(0.0);
     var depth = 0.0;
     var last_k = 0u;
-    if inside {
+    let in_loss = inside && (view.masked == 0u || (target_px[pix] >> 24u) != 255u);
+    if in_loss {
         for (var k = r.x; k < r.y; k++) {
             let id = order[k];
             if out_of_reach(load_reach(id), px, py) {

@@ -7,7 +7,8 @@
 //! The edge list is symmetric (both directions stored), so each invocation owns its
 //! surfel's gradient and needs no atomics. The LiDAR elevation per surfel comes from a
 //! lookup built once on the host, not a search per step. Each workgroup reduces the
-//! three loss sums and writes one partial triple.
+//! three loss sums and writes one partial triple. A z gradient that is not `usable`
+//! (guard.wgsl) raises `status`, and `adam` then applies nothing.
 //!
 //! Oracle: src/loss/regularise.rs.
 
@@ -30,6 +31,7 @@ struct RegParams {
 @group(0) @binding(4) var<storage, read> priors: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read_write> grads: array<f32>;
 @group(0) @binding(6) var<storage, read_write> partial: array<f32>;
+@group(0) @binding(7) var<storage, read_write> status: array<u32>;
 
 var<workgroup> red: array<vec3<f32>, 256>;
 
@@ -55,7 +57,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wg
         let e = z - pr.z;
         l.z = rp.w_lidar * pr.w * e * e;
         g += 2.0 * rp.w_lidar * pr.w * e;
-        grads[rp.stride * i + 2u] += g;
+        let gz = grads[rp.stride * i + 2u] + g;
+        grads[rp.stride * i + 2u] = gz;
+        if !usable(gz) {
+            status[0] = 1u;
+        }
     }
     red[li] = l;
     workgroupBarrier();

@@ -21,6 +21,11 @@ struct View {
     tile_bits: u32,
     channels: u32,
     count: u32,
+    // 1: composite only the pixels inside the loss mask (training), see rasterize.
+    masked: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 const PROJ_STRIDE: u32 = 24u;

@@ -70,46 +70,61 @@ fn demo_reconstruction_beats_the_ipm_baseline_and_meets_measured_floors() {
     assert!(ply.1.starts_with(b"ply\nformat binary_little_endian 1.0"));
 }
 
-fn nan_test_trainer(cfg: &TrainConfig) -> (Trainer, Params<f32>, ViewCamera) {
+fn nan_test_trainer(
+    cfg: &TrainConfig,
+    bad_prior: bool,
+) -> Result<(Trainer, Params<f32>, ViewCamera), TrainError> {
     let (p, mut cam) = rogs::render::check::test_scene(3);
     cam.exposure = [0.0, 0.0];
-    let reg = rogs::loss::regularise::RegData {
+    let mut reg = rogs::loss::regularise::RegData {
         adj_start: vec![0; p.len() + 1],
         priors: vec![[0.0; 4]; p.len()],
         ..Default::default()
     };
-    let t = pollster::block_on(Trainer::new(ctx(), &p, &reg, 1, cfg, 10.0, 5)).expect("trainer");
-    (t, p, cam)
+    if bad_prior {
+        // A NaN LiDAR elevation: a NaN z gradient for one surfel, while the rendered
+        // loss stays finite.
+        reg.priors[0] = [0.0, 0.0, f32::NAN, 1.0];
+        reg.with_lidar = 1;
+    }
+    let t = pollster::block_on(Trainer::new(ctx(), &p, &reg, 1, cfg, 10.0, 5))?;
+    Ok((t, p, cam))
 }
 
 #[test]
-fn a_non_finite_update_is_refused_whole_and_stops_optimisation() {
-    // A NaN learning rate for one group: the whole step is refused, not just the group.
+fn a_learning_rate_that_is_not_a_number_is_refused_up_front() {
     let mut cfg = TrainConfig::default();
     cfg.lr.logits = f32::NAN;
-    let (mut t, p, cam) = nan_test_trainer(&cfg);
+    let e = nan_test_trainer(&cfg, false).err().expect("refused");
+    assert!(matches!(e, TrainError::Settings(_)), "{e}");
+    assert!(e.to_string().contains("logits learning rate"), "{e}");
+}
+
+#[test]
+fn a_non_finite_gradient_is_refused_whole_and_stops_optimisation() {
+    let (mut t, p, cam) = nan_test_trainer(&TrainConfig::default(), true).expect("trainer");
     let npx = (cam.width * cam.height) as usize;
     let target: Vec<u32> = vec![0x0080_8080; npx];
-    let e = pollster::block_on(t.step(&cam, 0, &target, npx)).expect_err("NaN logits");
+    let e = pollster::block_on(t.step(&cam, 0, &target, npx)).expect_err("NaN gradient");
     assert!(
         matches!(
             e,
             TrainError::NonFinite {
                 step: 0,
                 kept: 0,
-                what: "the update"
+                what: "a gradient"
             }
         ),
         "{e}"
     );
     assert!(e.to_string().contains("kept"), "{e}");
     let kept = pollster::block_on(t.read_params()).expect("read");
-    assert_eq!(kept.logits, p.logits, "no NaN reached the logits");
+    assert_eq!(kept.pos, p.pos, "no NaN reached z");
     assert_eq!(
         kept.rgb, p.rgb,
         "the colours' finite update was refused too"
     );
-    assert_eq!(kept.pos, p.pos);
+    assert_eq!(kept.logits, p.logits);
     let e = pollster::block_on(t.read_exposures()).expect("exposures");
     assert_eq!(e, vec![[0.0, 0.0]]);
 }
@@ -118,7 +133,7 @@ fn a_non_finite_update_is_refused_whole_and_stops_optimisation() {
 fn a_non_finite_loss_stops_optimisation_before_any_update() {
     let mut cfg = TrainConfig::default();
     cfg.loss.rgb = f32::NAN;
-    let (mut t, p, cam) = nan_test_trainer(&cfg);
+    let (mut t, p, cam) = nan_test_trainer(&cfg, false).expect("trainer");
     let npx = (cam.width * cam.height) as usize;
     let target: Vec<u32> = vec![0x0080_8080; npx];
     let e = pollster::block_on(t.step(&cam, 0, &target, npx)).expect_err("NaN loss");

@@ -1,6 +1,6 @@
 //! Oracle of `shaders/adam.wgsl` and the learning rates: one Adam step of every
 //! learnable surfel parameter (x, y fixed, so without moments) and of one camera's
-//! exposure, applied only when every new value is finite.
+//! exposure, applied only when every gradient is usable (shaders/guard.wgsl).
 
 use crate::render::Params;
 use serde::Serialize;
@@ -45,6 +45,42 @@ impl Default for LearningRates {
 }
 
 impl LearningRates {
+    /// Refuses constants that could make an update non-finite (with finite
+    /// gradients below 1e18 and these, every Adam step is finite).
+    pub fn check(&self) -> Result<(), String> {
+        let rates = [
+            ("z_start", self.z_start),
+            ("z_end", self.z_end),
+            ("rotation", self.rotation),
+            ("scale", self.scale),
+            ("opacity", self.opacity),
+            ("rgb", self.rgb),
+            ("logits", self.logits),
+            ("exposure", self.exposure),
+        ];
+        for (name, v) in rates {
+            let positive = name.starts_with("z_");
+            if !(v.is_finite() && v >= 0.0 && v <= 1e3 && (!positive || v > 0.0)) {
+                return Err(format!(
+                    "the {name} learning rate is {v}; use a number {} and at most 1000",
+                    if positive { "above 0" } else { "from 0" }
+                ));
+            }
+        }
+        for (name, v) in [("beta1", self.beta1), ("beta2", self.beta2)] {
+            if !(0.0..1.0).contains(&v) {
+                return Err(format!("Adam's {name} is {v}; use a number in [0, 1)"));
+            }
+        }
+        if !(self.eps.is_finite() && self.eps > 0.0) {
+            return Err(format!(
+                "Adam's eps is {}; use a small positive number",
+                self.eps
+            ));
+        }
+        Ok(())
+    }
+
     /// The z learning rate (metres) at `step` of `steps`, for a scene of `extent` m.
     pub fn z_at(&self, step: usize, steps: usize, extent: f32) -> f32 {
         let t = if steps > 1 {
@@ -114,10 +150,16 @@ pub struct Exposure<'a> {
     pub moments: &'a mut [f32; 4],
 }
 
+/// `usable` of shaders/guard.wgsl.
+pub fn usable(x: f32) -> bool {
+    x.is_finite() && x.abs() < 1e18
+}
+
 /// One step of every surfel parameter in `p` from gradients `g` (same layout) and of
 /// the view's exposure; `moments` holds m, v interleaved per learnable slot
-/// (`2 learnable(channels)` per surfel). All or nothing: when any new value or moment
-/// would not be finite, nothing changes and the result is false.
+/// (`2 learnable(channels)` per surfel; the kernel stores them slot-major, which
+/// changes no value). All or nothing: when any gradient is not
+/// `usable`, nothing changes and the result is false.
 pub fn step(
     p: &mut Params<f32>,
     g: &Params<f32>,
@@ -125,66 +167,52 @@ pub fn step(
     e: Exposure,
     c: &StepConstants,
 ) -> bool {
+    let grads = g.pos.iter().flatten().chain(g.rotation.iter().flatten());
+    let grads = grads
+        .chain(g.log_scale.iter().flatten())
+        .chain(&g.opacity)
+        .chain(g.rgb.iter().flatten())
+        .chain(&g.logits)
+        .chain(&e.grad);
+    if !grads.copied().all(usable) {
+        return false;
+    }
     let ch = p.channels;
     let stride = 2 * learnable(ch);
-    let mut q = p.clone();
-    let mut mo = moments.to_vec();
     for i in 0..p.len() {
-        let m = &mut mo[stride * i..stride * (i + 1)];
-        q.pos[i][2] = adam(c, &mut m[0..2], q.pos[i][2], g.pos[i][2], c.lr_z);
+        let m = &mut moments[stride * i..stride * (i + 1)];
+        p.pos[i][2] = adam(c, &mut m[0..2], p.pos[i][2], g.pos[i][2], c.lr_z);
         for k in 0..4 {
             let s = 2 * (1 + k);
-            let r = &mut q.rotation[i][k];
+            let r = &mut p.rotation[i][k];
             *r = adam(c, &mut m[s..s + 2], *r, g.rotation[i][k], c.lr_rotation);
         }
         for k in 0..2 {
             let s = 2 * (5 + k);
-            let l = &mut q.log_scale[i][k];
+            let l = &mut p.log_scale[i][k];
             *l = adam(c, &mut m[s..s + 2], *l, g.log_scale[i][k], c.lr_scale);
         }
-        q.opacity[i] = adam(c, &mut m[14..16], q.opacity[i], g.opacity[i], c.lr_opacity);
+        p.opacity[i] = adam(c, &mut m[14..16], p.opacity[i], g.opacity[i], c.lr_opacity);
         for k in 0..3 {
             let s = 2 * (8 + k);
-            // Unclamped here so that a NaN is seen; clamped once found finite.
-            q.rgb[i][k] = adam(c, &mut m[s..s + 2], q.rgb[i][k], g.rgb[i][k], c.lr_rgb);
+            let v = adam(c, &mut m[s..s + 2], p.rgb[i][k], g.rgb[i][k], c.lr_rgb);
+            p.rgb[i][k] = v.clamp(0.0, 1.0);
         }
         for j in 0..ch {
             let s = 2 * (11 + j);
-            let l = &mut q.logits[ch * i + j];
+            let l = &mut p.logits[ch * i + j];
             *l = adam(c, &mut m[s..s + 2], *l, g.logits[ch * i + j], c.lr_logits);
         }
     }
-    let mut ev = *e.value;
-    let mut em = *e.moments;
     for k in 0..2 {
-        ev[k] = adam(
+        let v = e.value[k];
+        e.value[k] = adam(
             c,
-            &mut em[2 * k..2 * k + 2],
-            ev[k],
+            &mut e.moments[2 * k..2 * k + 2],
+            v,
             e.grad[k],
             c.lr_exposure,
         );
     }
-    let values = q.pos.iter().map(|v| v[2]);
-    let values = values
-        .chain(q.rotation.iter().flatten().copied())
-        .chain(q.log_scale.iter().flatten().copied())
-        .chain(q.opacity.iter().copied())
-        .chain(q.rgb.iter().flatten().copied())
-        .chain(q.logits.iter().copied());
-    let all_finite = values
-        .chain(mo.iter().copied())
-        .chain(ev)
-        .chain(em)
-        .all(f32::is_finite);
-    if all_finite {
-        for c in q.rgb.iter_mut().flatten() {
-            *c = c.clamp(0.0, 1.0);
-        }
-        *p = q;
-        moments.copy_from_slice(&mo);
-        *e.value = ev;
-        *e.moments = em;
-    }
-    all_finite
+    true
 }

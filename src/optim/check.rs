@@ -109,7 +109,9 @@ pub async fn compare_step(ctx: GpuContext) -> Result<StepDifferences, GpuError> 
         .collect();
     let mask = target.iter().filter(|t| *t >> 24 != 255).count();
     let extent = 10.0;
-    let mut t = Trainer::new(ctx, &p0, &reg, 1, &cfg, extent, 4).await?;
+    let mut t = Trainer::new(ctx, &p0, &reg, 1, &cfg, extent, 4)
+        .await
+        .map_err(|e| GpuError::Validation(e.to_string()))?;
     let cull = cfg.cull;
     let mut out = StepDifferences::default();
     // CPU chain of step 1.

@@ -5,10 +5,12 @@
 //!
 //! Step: `forward` → `loss` (per-pixel gradients) → read the loss; if it is not
 //! finite, stop → `rasterize_backward` + `project_backward` (parameter gradients in
-//! place in the view gradients) → `regularise` → `adam`'s `check` (is every new value
-//! finite?) → `adam` (surfels) and `step_exposure` (this view's camera), which apply
-//! the update only when it is. Either way a NaN never reaches the model, so the last
-//! good model is the current one and no copy of it is kept.
+//! place in the view gradients) → `regularise` → `adam` (surfels) and `step_exposure`
+//! (this view's camera), which apply nothing when a gradient was not usable (the
+//! status word that `project_backward` and `regularise` raise, shaders/guard.wgsl).
+//! Learning rates are checked when the trainer is made. Either way a NaN never
+//! reaches the model, so the last good model is the current one and no copy of it is
+//! kept.
 
 use super::adam::{learnable, StepConstants};
 use super::TrainConfig;
@@ -16,7 +18,7 @@ use crate::gpu::buffers::{bind, bytes_of, dispatch, init_storage, pipeline, stor
 use crate::gpu::readback::read_f32;
 use crate::gpu::{GpuContext, GpuError};
 use crate::loss::regularise::{RegData, RegWeights};
-use crate::render::gpu::{GpuParams, GpuRasterizer};
+use crate::render::gpu::{GpuParams, GpuRasterizer, GUARD_WGSL};
 use crate::render::rasterize_backward::VIEW_GRAD;
 use crate::render::{Params, ViewCamera};
 use thiserror::Error;
@@ -25,6 +27,8 @@ use thiserror::Error;
 pub enum TrainError {
     #[error(transparent)]
     Gpu(#[from] GpuError),
+    #[error("{0}")]
+    Settings(String),
     #[error(
         "{what} was not finite at step {step}; optimisation stopped and the model after \
          {kept} steps was kept. Try a smaller z learning rate or check the bundle's poses"
@@ -33,7 +37,7 @@ pub enum TrainError {
         step: usize,
         /// Steps whose updates the kept model holds.
         kept: usize,
-        /// "the loss" or "the update".
+        /// "the loss" or "a gradient".
         what: &'static str,
     },
 }
@@ -57,7 +61,6 @@ impl StepLoss {
 struct Kernels {
     loss: wgpu::ComputePipeline,
     regularise: wgpu::ComputePipeline,
-    adam_check: wgpu::ComputePipeline,
     adam: wgpu::ComputePipeline,
     exposure: wgpu::ComputePipeline,
 }
@@ -70,7 +73,7 @@ pub struct Trainer {
     moments: wgpu::Buffer,
     /// View gradients, and the parameter gradients `project_backward` leaves in place.
     view_grad: wgpu::Buffer,
-    /// Non-zero when `adam` refused the step's update.
+    /// Non-zero when a gradient of the step was not usable (`adam` then applies nothing).
     status: wgpu::Buffer,
     adj_start: wgpu::Buffer,
     adj: wgpu::Buffer,
@@ -121,7 +124,8 @@ impl Trainer {
         cfg: &TrainConfig,
         extent: f32,
         total_steps: usize,
-    ) -> Result<Self, GpuError> {
+    ) -> Result<Self, TrainError> {
+        cfg.lr.check().map_err(TrainError::Settings)?;
         check_fits(&ctx, p.len(), p.channels)?;
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let raster = GpuRasterizer::new(&ctx).await?;
@@ -136,10 +140,9 @@ impl Trainer {
             regularise: pipeline(
                 &ctx,
                 "regularise",
-                &[include_str!("../../shaders/regularise.wgsl")],
+                &[GUARD_WGSL, include_str!("../../shaders/regularise.wgsl")],
                 "main",
             ),
-            adam_check: pipeline(&ctx, "adam_check", &[adam_src], "check"),
             adam: pipeline(&ctx, "adam", &[adam_src], "main"),
             exposure: pipeline(&ctx, "adam_exposure", &[adam_src], "step_exposure"),
         };
@@ -170,7 +173,7 @@ impl Trainer {
             ctx,
         };
         if let Some(e) = scope.pop().await {
-            return Err(GpuError::Validation(e.to_string()));
+            return Err(GpuError::Validation(e.to_string()).into());
         }
         Ok(me)
     }
@@ -216,6 +219,8 @@ impl Trainer {
         let ctx = &self.ctx;
         let ch = self.params.channels;
         let camera = camera.min(self.cameras.saturating_sub(1));
+        let target = init_storage(ctx, "target", bytes_of(target));
+        // Only the loss's pixels are composited: the rest would get no gradient.
         let f = self
             .raster
             .forward_with(
@@ -224,6 +229,7 @@ impl Trainer {
                 cam,
                 &self.cfg.cull,
                 Some((&self.exposure, 8 * camera as u64)),
+                Some(&target),
             )
             .await?;
         let npx = cam.width * cam.height;
@@ -239,7 +245,6 @@ impl Trainer {
             self.cfg.loss.min_alpha.to_bits(),
         ];
         let lp = uniform(ctx, "loss_params", bytes_of(&lp));
-        let target = init_storage(ctx, "target", bytes_of(target));
         let g_px = storage(ctx, "g_px", 4 * 5 * npx as u64);
         let g_logits = storage(ctx, "g_logits", 4 * (ch * npx) as u64);
         let wgs = (groups.0 * groups.1) as usize;
@@ -275,6 +280,7 @@ impl Trainer {
             });
         }
         let mut enc = ctx.device.create_command_encoder(&Default::default());
+        enc.clear_buffer(&self.status, 0, None);
         self.raster.encode_backward(
             ctx,
             &mut enc,
@@ -283,6 +289,7 @@ impl Trainer {
             &g_px,
             &g_logits,
             &self.view_grad,
+            &self.status,
         );
         let n = self.params.count;
         let stride = VIEW_GRAD as u32 + ch;
@@ -313,6 +320,7 @@ impl Trainer {
                 (4, &self.priors),
                 (5, &self.view_grad),
                 (6, &reg_partial),
+                (7, &self.status),
             ],
         );
         dispatch(&mut enc, &self.k.regularise, &bg, sg);
@@ -359,9 +367,6 @@ impl Trainer {
             (9, &self.exposure),
             (10, &self.status),
         ];
-        enc.clear_buffer(&self.status, 0, None);
-        let k = &self.k.adam_check;
-        dispatch(&mut enc, k, &bind(ctx, k, &all), sg);
         // Auto layouts hold only what an entry uses: `main` leaves the exposure alone.
         let k = &self.k.adam;
         dispatch(
@@ -382,7 +387,7 @@ impl Trainer {
             return Err(TrainError::NonFinite {
                 step,
                 kept: step,
-                what: "the update",
+                what: "a gradient",
             });
         }
         for s in sums[..3 * swgs].chunks_exact(3) {
@@ -391,6 +396,15 @@ impl Trainer {
             loss.lidar += s[2] as f64;
         }
         self.steps_done += 1;
+        // Gradients were usable and the update is in, but a regulariser's loss is not
+        // finite (a NaN prior can give a clamped, finite gradient): stop here too.
+        if !loss.total().is_finite() {
+            return Err(TrainError::NonFinite {
+                step,
+                kept: self.steps_done,
+                what: "the loss",
+            });
+        }
         Ok(loss)
     }
 

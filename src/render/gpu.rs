@@ -18,6 +18,8 @@ use crate::gpu::{AccumStrategy, GpuContext, GpuError};
 
 const VIEW_WGSL: &str = include_str!("../../shaders/view.wgsl");
 const LOAD_SURFEL_WGSL: &str = include_str!("../../shaders/load_surfel.wgsl");
+/// `usable(x)`: the gradient test behind the optimiser's status word.
+pub const GUARD_WGSL: &str = include_str!("../../shaders/guard.wgsl");
 /// Floats per pixel of the packed forward outputs (`PIX_STRIDE` in view.wgsl).
 const PIX_STRIDE: usize = 10;
 
@@ -66,8 +68,14 @@ pub struct GpuForward {
 const VIEW_EXPOSURE_OFFSET: u64 = 4 * 23;
 
 /// The `View` uniform of shaders/view.wgsl.
-fn view_bytes(cam: &ViewCamera, cull: &CullConfig, count: u32, channels: u32) -> Vec<u8> {
-    let mut f: Vec<u32> = Vec::with_capacity(28);
+fn view_bytes(
+    cam: &ViewCamera,
+    cull: &CullConfig,
+    count: u32,
+    channels: u32,
+    masked: bool,
+) -> Vec<u8> {
+    let mut f: Vec<u32> = Vec::with_capacity(32);
     for row in &cam.world_to_cam {
         f.extend(row.iter().map(|v| v.to_bits()));
     }
@@ -75,6 +83,7 @@ fn view_bytes(cam: &ViewCamera, cull: &CullConfig, count: u32, channels: u32) ->
     f.extend([cam.width, cam.height, cam.tiles_x(), cam.tiles_y()]);
     f.extend([cull.near, cull.far, cull.half_width, cam.exposure[0]].map(f32::to_bits));
     f.extend([cam.exposure[1].to_bits(), tile_bits(cam), channels, count]);
+    f.extend([masked as u32, 0, 0, 0]);
     bytemuck::cast_slice(&f).to_vec()
 }
 
@@ -134,6 +143,7 @@ impl GpuRasterizer {
                 "project_backward",
                 &[
                     VIEW_WGSL,
+                    GUARD_WGSL,
                     include_str!("../../shaders/project_backward.wgsl"),
                 ],
                 "main",
@@ -175,12 +185,15 @@ impl GpuRasterizer {
         cam: &ViewCamera,
         cull: &CullConfig,
     ) -> Result<GpuForward, GpuError> {
-        self.forward_with(ctx, p, cam, cull, None).await
+        self.forward_with(ctx, p, cam, cull, None, None).await
     }
 
     /// The forward pass; with `exposure` = (buffer, byte offset), the view's exposure
     /// (a, b) is copied on the GPU from there instead of taken from `cam`, so that an
-    /// optimiser can keep it on the GPU.
+    /// optimiser can keep it on the GPU. With `mask` (a packed training target,
+    /// `loss::targets`), only the pixels inside the loss mask are composited; the
+    /// others read as empty (training needs nothing else from them).
+    #[allow(clippy::too_many_arguments)]
     pub async fn forward_with(
         &self,
         ctx: &GpuContext,
@@ -188,9 +201,11 @@ impl GpuRasterizer {
         cam: &ViewCamera,
         cull: &CullConfig,
         exposure: Option<(&wgpu::Buffer, u64)>,
+        mask: Option<&wgpu::Buffer>,
     ) -> Result<GpuForward, GpuError> {
         let n = p.count;
-        let view = uniform(ctx, "view", &view_bytes(cam, cull, n, p.channels));
+        let bytes = view_bytes(cam, cull, n, p.channels, mask.is_some());
+        let view = uniform(ctx, "view", &bytes);
         let (gx, gy) = ctx.dispatch_2d(n.div_ceil(256));
         let grid = uniform(ctx, "grid", bytemuck::cast_slice(&[gx * 256, 0u32, 0, 0]));
         let proj = storage(ctx, "proj", 4 * 24 * n as u64);
@@ -343,6 +358,7 @@ impl GpuRasterizer {
                 (5, &p.logits),
                 (6, &out.px),
                 (7, &out.logits),
+                (8, mask.unwrap_or(&ranges)),
             ],
         );
         dispatch(
@@ -382,7 +398,8 @@ impl GpuRasterizer {
     /// first: `VIEW_GRAD + channels` floats per surfel, then the exposure gradient
     /// d/da, d/db. `project_backward` leaves each surfel's parameter gradients at the
     /// head of its slot (`13 + channels`: position 3, rotation 4, log-scales 2,
-    /// opacity, rgb 3, logits; `unpack_grads`).
+    /// opacity, rgb 3, logits; `unpack_grads`). A gradient that is not usable (NaN,
+    /// Inf or beyond 1e18) sets the u32 `status` to non-zero; it is not cleared here.
     #[allow(clippy::too_many_arguments)]
     pub fn encode_backward(
         &self,
@@ -393,6 +410,7 @@ impl GpuRasterizer {
         g_px: &wgpu::Buffer,
         g_logits: &wgpu::Buffer,
         view_grad: &wgpu::Buffer,
+        status: &wgpu::Buffer,
     ) {
         let n = p.count;
         let npx = (f.width * f.height) as u64;
@@ -431,6 +449,7 @@ impl GpuRasterizer {
                 (1, view_grad),
                 (2, &p.rotation),
                 (3, &p.log_scale),
+                (4, status),
                 (5, &grid),
             ],
         );
@@ -464,8 +483,9 @@ impl GpuRasterizer {
         let g_px = init_storage(ctx, "g_px", bytemuck::cast_slice(&packed));
         let g_logits = init_storage(ctx, "g_logits", bytemuck::cast_slice(&g.logits));
         let view_grad = storage(ctx, "view_grad", 4 * (stride * n + 2) as u64);
+        let status = storage(ctx, "status", 4);
         let mut enc = ctx.device.create_command_encoder(&Default::default());
-        self.encode_backward(ctx, &mut enc, p, f, &g_px, &g_logits, &view_grad);
+        self.encode_backward(ctx, &mut enc, p, f, &g_px, &g_logits, &view_grad, &status);
         ctx.queue.submit([enc.finish()]);
         let flat = read_f32(ctx, &view_grad, stride * n + 2).await?;
         Ok(unpack_grads(&flat, ch))

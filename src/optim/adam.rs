@@ -60,7 +60,7 @@ impl LearningRates {
         ];
         for (name, v) in rates {
             let positive = name.starts_with("z_");
-            if !(v.is_finite() && v >= 0.0 && v <= 1e3 && (!positive || v > 0.0)) {
+            if !((0.0..=1e3).contains(&v) && (!positive || v > 0.0)) {
                 return Err(format!(
                     "the {name} learning rate is {v}; use a number {} and at most 1000",
                     if positive { "above 0" } else { "from 0" }

@@ -10,6 +10,11 @@
 //! lands on is written (slot k + 5 is read before slot k is written; logits move
 //! down by 5 in increasing order), so no other invocation or ordering is involved.
 //!
+//! A surfel with no tile in this view (culled or off screen) has no view gradient,
+//! and its slot is still as `encode_backward` cleared it: zero, which is also its
+//! parameter gradient, so it returns at once. In a large scene most surfels are
+//! outside any one view, and this is most of the pass.
+//!
 //! Any gradient that is not `usable` (guard.wgsl), the surfel's or (invocation 0) the
 //! exposure's, raises `status`, and `adam` then applies nothing.
 //!
@@ -21,6 +26,7 @@
 @group(0) @binding(3) var<storage, read> log_scale: array<f32>;
 @group(0) @binding(4) var<storage, read_write> status: array<u32>;
 @group(0) @binding(5) var<uniform> grid: vec4<u32>;
+@group(0) @binding(6) var<storage, read> tile_count: array<u32>;
 
 var<private> ok: bool;
 
@@ -42,6 +48,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let ch = view.channels;
     let vs = 18u + ch;
+    if i == 0u {
+        let e = vs * view.count;
+        if !(usable(view_grad[e]) & usable(view_grad[e + 1u])) {
+            status[0] = 1u;
+        }
+    }
+    if tile_count[i] == 0u {
+        return;
+    }
     let v = vs * i;
     let dpc = vec3<f32>(view_grad[v], view_grad[v + 1u], view_grad[v + 2u]);
     let dp = wt(dpc);
@@ -79,10 +94,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     put(o + 12u, view_grad[v + 17u]);
     for (var j = 0u; j < ch; j++) {
         put(o + 13u + j, view_grad[v + 18u + j]);
-    }
-    if i == 0u {
-        let e = vs * view.count;
-        ok = ok & usable(view_grad[e]) & usable(view_grad[e + 1u]);
     }
     if !ok {
         status[0] = 1u;

@@ -2,8 +2,10 @@
 //! workgroup per 8×8 tile, one invocation per pixel, each walking its tile's list back
 //! from its own `last` contributor (so surfels behind its termination are never read),
 //! recovering transmittance by division (alpha ≤ 0.99 keeps it stable), and adding its
-//! share of each camera-space gradient with `accum_add` (native f32 atomics, or CAS in
-//! browsers; `accum` is bound at 0 by the prepended snippet). Pixels read the list
+//! share of each camera-space gradient with `lanes_add`: summed over the subgroup
+//! first where the adapter has subgroups (lanes_subgroup.wgsl, the lanes walking in
+//! step), then `accum_add` (native f32 atomics, or CAS in browsers; `accum` is bound
+//! at 0 by the prepended snippet). Pixels read the list
 //! straight from storage: on lavapipe, staging batches in workgroup memory behind
 //! barriers was no faster. The exposure gradient is reduced over the workgroup first,
 //! then added once. Logit accumulators (runtime channel count) live in a per-pixel
@@ -38,9 +40,9 @@ var<workgroup> range: vec2<u32>;
 var<workgroup> red: array<vec2<f32>, 64>;
 
 fn add3(base: u32, v: vec3<f32>) {
-    accum_add(base, v.x);
-    accum_add(base + 1u, v.y);
-    accum_add(base + 2u, v.z);
+    lanes_add(base, v.x);
+    lanes_add(base + 1u, v.y);
+    lanes_add(base + 2u, v.z);
 }
 
 @compute @workgroup_size(8, 8)
@@ -86,64 +88,97 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
     var last_alpha = 0.0;
     var acc_d = 0.0;
     var last_d = 0.0;
-    // Pixels outside the view have my_last = 0 and walk nothing.
-    for (var k = max(my_last, r.x); k > r.x; k--) {
+    lanes_init(li);
+    // Pixels outside the view or the loss mask have my_last = 0 and use nothing. A
+    // pixel uses surfel k - 1 only below its own last contributor; the walk starts at
+    // the highest bound among the lanes so that they stay in step (lanes_*.wgsl).
+    let hi = lanes_max(max(my_last, r.x));
+    for (var k = hi; k > r.x; k--) {
         let id = order[k - 1u];
-        if out_of_reach(load_reach(id), px, py) {
+        var live = k <= my_last && !out_of_reach(load_reach(id), px, py);
+        var s: Surfel;
+        var e: Eval;
+        if live {
+            s = load_surfel(id);
+            e = eval_surfel(s, px, py, view);
+            live = e.alpha >= MIN_ALPHA;
+        }
+        if !lanes_any(live) {
             continue;
         }
-        let s = load_surfel(id);
-        let e = eval_surfel(s, px, py, view);
-        if e.alpha < MIN_ALPHA {
-            continue;
-        }
-        t = t / (1.0 - e.alpha);
-        let w = e.alpha * t;
+        // Lanes whose pixel does not use this surfel add zeros and keep their state.
         let g0 = stride * id;
-        let c = vec3<f32>(rgb[3u * id], rgb[3u * id + 1u], rgb[3u * id + 2u]);
-        acc_c = last_alpha * last_c + (1.0 - last_alpha) * acc_c;
-        last_c = c;
-        var d_alpha = dot(c - acc_c, dc);
-        add3(g0 + S_RGB, w * dc);
+        var w = 0.0;
+        var d_alpha = 0.0;
+        var g_rgb = vec3<f32>(0.0);
+        if live {
+            t = t / (1.0 - e.alpha);
+            w = e.alpha * t;
+            let c = vec3<f32>(rgb[3u * id], rgb[3u * id + 1u], rgb[3u * id + 2u]);
+            acc_c = last_alpha * last_c + (1.0 - last_alpha) * acc_c;
+            last_c = c;
+            d_alpha = dot(c - acc_c, dc);
+            g_rgb = w * dc;
+        }
+        add3(g0 + S_RGB, g_rgb);
         let sp = pix * 2u * ch;
         for (var q = 0u; q < ch; q++) {
-            let l = logits[id * ch + q];
-            let acc = last_alpha * scratch[sp + ch + q] + (1.0 - last_alpha) * scratch[sp + q];
-            scratch[sp + q] = acc;
-            scratch[sp + ch + q] = l;
-            let dl = g_logits[pix * ch + q];
-            d_alpha += (l - acc) * dl;
-            accum_add(g0 + S_LOGITS + q, w * dl);
+            var g_l = 0.0;
+            if live {
+                let l = logits[id * ch + q];
+                let acc = last_alpha * scratch[sp + ch + q] + (1.0 - last_alpha) * scratch[sp + q];
+                scratch[sp + q] = acc;
+                scratch[sp + ch + q] = l;
+                let dl = g_logits[pix * ch + q];
+                d_alpha += (l - acc) * dl;
+                g_l = w * dl;
+            }
+            lanes_add(g0 + S_LOGITS + q, g_l);
         }
-        acc_d = last_alpha * last_d + (1.0 - last_alpha) * acc_d;
-        last_d = s.pc.z;
-        d_alpha += (s.pc.z - acc_d) * dd;
-        d_alpha = d_alpha * t + t_fin / (1.0 - e.alpha) * da_out;
-        last_alpha = e.alpha;
-        var dpc = vec3<f32>(0.0, 0.0, w * dd);
-        if e.raw_alpha <= MAX_ALPHA {
-            let sig = s.opacity;
-            accum_add(g0 + S_OPACITY, d_alpha * e.g * sig * (1.0 - sig));
-            let d_rho = d_alpha * sig * -0.5 * e.g;
-            if e.ray_hit {
-                let gu = d_rho * 2.0 * e.u;
-                let gv = d_rho * 2.0 * e.v;
-                accum_add(g0 + S_SU, -gu * e.u / s.su);
-                accum_add(g0 + S_SV, -gv * e.v / s.sv);
-                add3(g0 + S_TU, gu * e.q / s.su);
-                add3(g0 + S_TV, gv * e.q / s.sv);
-                let gq = gu * s.tu / s.su + gv * s.tv / s.sv;
-                let nd = dot(s.n, e.d);
-                let d_lambda = dot(gq, e.d);
-                dpc += -gq + d_lambda * s.n / nd;
-                add3(g0 + S_N, d_lambda * (s.pc - e.d * e.lambda) / nd);
-            } else {
-                let k2 = -2.0 * LOWPASS_INV_SQ * d_rho;
-                let dmu = k2 * e.delta;
-                let z = s.pc.z;
-                dpc += vec3<f32>(dmu.x * view.fx / z, dmu.y * view.fy / z, -(dmu.x * view.fx * s.pc.x + dmu.y * view.fy * s.pc.y) / (z * z));
+        var g_op = 0.0;
+        var g_su = 0.0;
+        var g_sv = 0.0;
+        var g_tu = vec3<f32>(0.0);
+        var g_tv = vec3<f32>(0.0);
+        var g_n = vec3<f32>(0.0);
+        var dpc = vec3<f32>(0.0);
+        if live {
+            acc_d = last_alpha * last_d + (1.0 - last_alpha) * acc_d;
+            last_d = s.pc.z;
+            d_alpha += (s.pc.z - acc_d) * dd;
+            d_alpha = d_alpha * t + t_fin / (1.0 - e.alpha) * da_out;
+            last_alpha = e.alpha;
+            dpc = vec3<f32>(0.0, 0.0, w * dd);
+            if e.raw_alpha <= MAX_ALPHA {
+                let sig = s.opacity;
+                g_op = d_alpha * e.g * sig * (1.0 - sig);
+                let d_rho = d_alpha * sig * -0.5 * e.g;
+                if e.ray_hit {
+                    let gu = d_rho * 2.0 * e.u;
+                    let gv = d_rho * 2.0 * e.v;
+                    g_su = -gu * e.u / s.su;
+                    g_sv = -gv * e.v / s.sv;
+                    g_tu = gu * e.q / s.su;
+                    g_tv = gv * e.q / s.sv;
+                    let gq = gu * s.tu / s.su + gv * s.tv / s.sv;
+                    let nd = dot(s.n, e.d);
+                    let d_lambda = dot(gq, e.d);
+                    dpc += -gq + d_lambda * s.n / nd;
+                    g_n = d_lambda * (s.pc - e.d * e.lambda) / nd;
+                } else {
+                    let k2 = -2.0 * LOWPASS_INV_SQ * d_rho;
+                    let dmu = k2 * e.delta;
+                    let z = s.pc.z;
+                    dpc += vec3<f32>(dmu.x * view.fx / z, dmu.y * view.fy / z, -(dmu.x * view.fx * s.pc.x + dmu.y * view.fy * s.pc.y) / (z * z));
+                }
             }
         }
+        lanes_add(g0 + S_OPACITY, g_op);
+        lanes_add(g0 + S_SU, g_su);
+        lanes_add(g0 + S_SV, g_sv);
+        add3(g0 + S_TU, g_tu);
+        add3(g0 + S_TV, g_tv);
+        add3(g0 + S_N, g_n);
         add3(g0 + S_PC, dpc);
     }
     // The exposure gradient: one add per workgroup instead of one per pixel.

@@ -9,10 +9,16 @@ fn ctx() -> GpuContext {
     GpuContext::new_blocking().unwrap_or_else(|e| panic!("GPU tests need an adapter: {e}"))
 }
 
-fn run(strategy: AccumStrategy) {
+fn run(strategy: AccumStrategy, subgroups: bool) {
     let c = ctx();
-    let d = pollster::block_on(compare(&c, strategy)).expect("gpu");
-    eprintln!("{strategy:?}: {d:?}");
+    if subgroups {
+        assert!(
+            c.report.subgroups,
+            "lavapipe has subgroups: this path must be tested"
+        );
+    }
+    let d = pollster::block_on(compare(&c, strategy, subgroups)).expect("gpu");
+    eprintln!("{strategy:?}, subgroups {subgroups}: {d:?}");
     assert_eq!(
         d.pairs.0 as usize, d.pairs.1,
         "surfel-tile pair counts differ"
@@ -29,15 +35,22 @@ fn run(strategy: AccumStrategy) {
 
 #[test]
 fn gpu_forward_and_backward_match_the_oracle_with_cas_accumulation() {
-    run(AccumStrategy::CasU32);
+    run(AccumStrategy::CasU32, true);
 }
 
 #[test]
 fn gpu_forward_and_backward_match_the_oracle_with_native_atomics() {
     let c = ctx();
-    if c.report.accumulation == AccumStrategy::NativeF32 {
-        run(AccumStrategy::NativeF32);
-    } else {
-        assert!(!c.features.contains(wgpu::Features::SHADER_FLOAT32_ATOMIC));
-    }
+    assert_eq!(
+        c.report.accumulation,
+        AccumStrategy::NativeF32,
+        "lavapipe has f32 atomics"
+    );
+    run(AccumStrategy::NativeF32, true);
+}
+
+#[test]
+fn gpu_backward_matches_the_oracle_without_subgroup_reduction() {
+    run(AccumStrategy::NativeF32, false);
+    run(AccumStrategy::CasU32, false);
 }

@@ -59,7 +59,7 @@ async fn rasteriser_matches_the_cpu_oracle_in_the_browser() {
         Ok(c) => c,
         Err(e) => panic!("WebGPU adapter required: {e}"),
     };
-    let d = rogs::render::check::compare(&ctx, AccumStrategy::CasU32)
+    let d = rogs::render::check::compare(&ctx, AccumStrategy::CasU32, ctx.report.subgroups)
         .await
         .expect("gpu");
     assert_eq!(

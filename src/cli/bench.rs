@@ -43,6 +43,10 @@ pub enum Bench {
         /// Corridor half-width, metres.
         #[arg(long, default_value_t = 8.0)]
         half_width: f64,
+        /// Add each pixel's gradients with its own atomics instead of summing them
+        /// over the subgroup first (to measure what the reduction gains).
+        #[arg(long)]
+        no_subgroup_reduction: bool,
     },
     /// Grid, initialisation and refinement of a bundle: time per stage, surfel
     /// counts and bytes per surfel (median of the runs).
@@ -81,7 +85,14 @@ pub fn run(b: Bench) -> Result<ExitCode, String> {
             steps,
             resolution,
             half_width,
-        } => super::bench_step::run(&bundle, steps, resolution, half_width),
+            no_subgroup_reduction,
+        } => super::bench_step::run(
+            &bundle,
+            steps,
+            resolution,
+            half_width,
+            no_subgroup_reduction,
+        ),
         Bench::Init {
             bundle,
             runs,

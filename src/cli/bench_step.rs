@@ -17,6 +17,7 @@ pub fn run(
     steps: usize,
     resolution: f64,
     half_width: f64,
+    no_subgroup_reduction: bool,
 ) -> Result<ExitCode, String> {
     let b = Bundle::open(bundle, Limits::default(), &mut |_, _| {}).map_err(|e| e.to_string())?;
     let mut cfg = ReconstructConfig::default();
@@ -24,7 +25,9 @@ pub fn run(
     cfg.prepare.grid.half_width = half_width;
     // One warm-up step (first use of every pipeline and buffer size), then the timed ones.
     cfg.train.max_steps = Some(steps.max(1) + 1);
-    let ctx = GpuContext::new_blocking().map_err(|e| e.to_string())?;
+    let mut ctx = GpuContext::new_blocking().map_err(|e| e.to_string())?;
+    ctx.report.subgroups &= !no_subgroup_reduction;
+    let subgroups = ctx.report.subgroups;
     let mut s = pollster::block_on(Session::new(&b, cfg, ctx)).map_err(|e| e.to_string())?;
     pollster::block_on(s.step(&b)).map_err(|e| e.to_string())?;
     let mut timer = PassTimer::install(&s.trainer.ctx);
@@ -58,6 +61,8 @@ pub fn run(
         "bench": "step",
         "bundle": bundle.display().to_string(),
         "adapter": s.trainer.ctx.report.name,
+        "subgroup_reduction": subgroups,
+        "seconds_per_step_mean": wall.iter().sum::<f64>() / n,
         "surfels": s.prepare_report.surfels,
         "training_views": views,
         "steps_timed": wall.len(),

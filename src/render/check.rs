@@ -44,12 +44,18 @@ fn rel_diff(a: &[f32], b: &[f32]) -> f32 {
     max_diff(a, b) / scale
 }
 
-pub async fn compare(ctx: &GpuContext, strategy: AccumStrategy) -> Result<Differences, GpuError> {
+/// GPU against the oracle with an accumulation `strategy`, reducing over subgroups
+/// first or not (`subgroups`).
+pub async fn compare(
+    ctx: &GpuContext,
+    strategy: AccumStrategy,
+    subgroups: bool,
+) -> Result<Differences, GpuError> {
     let ch = 3;
     let (p, cam) = test_scene(ch);
     let cull = CullConfig::default();
     let oracle = render(&p, &cam, &cull);
-    let r = GpuRasterizer::with_strategy(ctx, strategy).await?;
+    let r = GpuRasterizer::with_strategy(ctx, strategy, subgroups).await?;
     let gp = GpuRasterizer::upload(ctx, &p);
     let f = r.forward(ctx, &gp, &cam, &cull).await?;
     let img = GpuRasterizer::read_image(ctx, &f).await?;

@@ -55,6 +55,8 @@ pub struct GpuForward {
     pub px: wgpu::Buffer,
     pub logits: wgpu::Buffer,
     pub proj: wgpu::Buffer,
+    /// Tiles each surfel touches (0: not in this view).
+    pub counts: wgpu::Buffer,
     pub order: wgpu::Buffer,
     pub ranges: wgpu::Buffer,
     pub view: wgpu::Buffer,
@@ -90,14 +92,22 @@ fn view_bytes(
 impl GpuRasterizer {
     /// Pipelines using the adapter's preferred gradient accumulation.
     pub async fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
-        Self::with_strategy(ctx, ctx.report.accumulation).await
+        Self::with_strategy(ctx, ctx.report.accumulation, ctx.report.subgroups).await
     }
 
-    /// Pipelines with an explicit accumulation strategy (tests run both natively).
+    /// Pipelines with an explicit accumulation strategy, reducing the backward pass's
+    /// gradient adds over subgroups first or not (tests run every combination
+    /// natively; `subgroups` needs the adapter's SUBGROUP feature).
     pub async fn with_strategy(
         ctx: &GpuContext,
         strategy: AccumStrategy,
+        subgroups: bool,
     ) -> Result<Self, GpuError> {
+        let lanes = if subgroups {
+            include_str!("../../shaders/lanes_subgroup.wgsl")
+        } else {
+            include_str!("../../shaders/lanes_single.wgsl")
+        };
         let pipe = |label: &str, parts: &[&str], entry: &str| pipeline(ctx, label, parts, entry);
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let scan = include_str!("../../shaders/scan.wgsl");
@@ -132,6 +142,7 @@ impl GpuRasterizer {
             raster_bwd: pipe(
                 "rasterize_backward",
                 &[
+                    lanes,
                     strategy.wgsl(),
                     VIEW_WGSL,
                     LOAD_SURFEL_WGSL,
@@ -284,6 +295,7 @@ impl GpuRasterizer {
             px: storage(ctx, "px_out", 4 * PIX_STRIDE as u64 * npx),
             logits: storage(ctx, "out_logits", 4 * ch * npx),
             proj,
+            counts: counts.clone(),
             order: values_a.clone(),
             ranges: ranges.clone(),
             view,
@@ -451,6 +463,7 @@ impl GpuRasterizer {
                 (3, &p.log_scale),
                 (4, status),
                 (5, &grid),
+                (6, &f.counts),
             ],
         );
         dispatch(enc, &self.project_bwd, &bg, (gx, gy, 1));

@@ -1,12 +1,13 @@
 // Times the in-page optimisation of a bundle in headless Chromium (WebGPU on
-// SwiftShader): `node scripts/bench-page.mjs BUNDLE.zip [resolution]`. Serves www/
-// (build it first: wasm-pack build --release --target web --out-dir www/pkg) and
-// prints the steps, seconds per step and total time as JSON.
+// SwiftShader): `node scripts/bench-page.mjs BUNDLE.zip [resolution] [steps]`. Serves
+// www/ (build it first: wasm-pack build --release --target web --out-dir www/pkg) and
+// prints the steps, seconds per step and total time as JSON. With `steps`, it stops
+// the run after that many steps (large bundles: time per step without a whole epoch).
 import path from 'node:path';
 import { chromium } from 'playwright-core';
 import { createServer } from './serve.mjs';
 
-const [bundle, resolution = '0.1'] = process.argv.slice(2);
+const [bundle, resolution = '0.1', maxSteps] = process.argv.slice(2);
 if (!bundle) {
   console.error('usage: node scripts/bench-page.mjs BUNDLE.zip [resolution]');
   process.exit(2);
@@ -26,6 +27,14 @@ try {
   await page.selectOption('#set-resolution', resolution);
   const t0 = Date.now();
   await page.click('#run');
+  if (maxSteps) {
+    await page.waitForFunction((n) => Number(document.body.dataset.steps || 0) >= n, Number(maxSteps), { timeout: 3_600_000, polling: 500 });
+    const text = await page.textContent('#progress-text');
+    await page.click('#stop');
+    const perStep = Number((text.match(/([\d.]+) s per step/) || [])[1]);
+    console.log(JSON.stringify({ bundle, resolution: Number(resolution), steps: Number(maxSteps), seconds_per_step: perStep, setup_and_steps_s: (Date.now() - t0) / 1000, progress: text }, null, 2));
+    process.exit(0);
+  }
   await page.waitForSelector('#viewer:not([hidden]) #exports a', { timeout: 3_600_000 });
   const total = (Date.now() - t0) / 1000;
   const steps = Number(await page.getAttribute('body', 'data-steps'));

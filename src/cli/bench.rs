@@ -27,6 +27,10 @@ pub enum Bench {
         /// Skip adaptive refinement (faster set-up).
         #[arg(long)]
         no_adaptive: bool,
+        /// Add each pixel's gradients with its own atomics instead of summing them
+        /// over the subgroup first.
+        #[arg(long)]
+        no_subgroup_reduction: bool,
     },
     /// Optimisation steps of a bundle: wall time per step (median), GPU time per
     /// kernel from timestamp queries where the adapter has them, the implied time per
@@ -79,7 +83,15 @@ pub fn run(b: Bench) -> Result<ExitCode, String> {
             runs,
             resolution,
             no_adaptive,
-        } => raster(&bundle, frame, view, runs, resolution, no_adaptive),
+            no_subgroup_reduction,
+        } => raster(
+            &bundle,
+            (frame, view),
+            runs,
+            resolution,
+            no_adaptive,
+            no_subgroup_reduction,
+        ),
         Bench::Step {
             bundle,
             steps,
@@ -143,11 +155,11 @@ pub fn run(b: Bench) -> Result<ExitCode, String> {
 
 fn raster(
     bundle: &std::path::Path,
-    frame: usize,
-    view: usize,
+    (frame, view): (usize, usize),
     runs: usize,
     resolution: f64,
     no_adaptive: bool,
+    no_subgroup_reduction: bool,
 ) -> Result<ExitCode, String> {
     use crate::gpu::GpuContext;
     use crate::render::from_bundle::{local_origin, params, view_camera};
@@ -181,7 +193,8 @@ fn raster(
             .collect(),
         channels: ch,
     };
-    let ctx = GpuContext::new_blocking().map_err(|e| e.to_string())?;
+    let mut ctx = GpuContext::new_blocking().map_err(|e| e.to_string())?;
+    ctx.report.subgroups &= !no_subgroup_reduction;
     let r = pollster::block_on(GpuRasterizer::new(&ctx)).map_err(|e| e.to_string())?;
     let gp = GpuRasterizer::upload(&ctx, &sub);
     let npx = (cam.width * cam.height) as usize;
@@ -228,6 +241,7 @@ fn raster(
         "bench": "raster",
         "adapter": ctx.report.name,
         "accumulation": ctx.report.accumulation,
+        "subgroup_reduction": ctx.report.subgroups,
         "view": {"width": cam.width, "height": cam.height, "frame": frame, "view": view},
         "surfels_total": all.len(),
         "surfels_in_view": sub.len(),

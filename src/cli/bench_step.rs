@@ -67,7 +67,8 @@ pub fn run(
         "training_views": views,
         "steps_timed": wall.len(),
         "seconds_per_step": median,
-        "seconds_per_epoch": median * views as f64,
+        // An epoch pays for the slow steps too: the mean, not the median.
+        "seconds_per_epoch": wall.iter().sum::<f64>() / n * views as f64,
         "gpu_kernel_ms_per_step": if timer.is_some() { serde_json::json!(gpu_ms) } else { serde_json::Value::Null },
         "kernels": kernels,
         "bytes_per_surfel_gpu": s.bytes_per_surfel_gpu,

@@ -8,8 +8,10 @@
 //! at 0 by the prepended snippet). Pixels read the list
 //! straight from storage: on lavapipe, staging batches in workgroup memory behind
 //! barriers was no faster. The exposure gradient is reduced over the workgroup first,
-//! then added once. Logit accumulators (runtime channel count) live in a per-pixel
-//! scratch buffer.
+//! then added once. The logits (runtime channel count) need no per-pixel accumulators:
+//! their share of dL/dalpha is Σ_q (l_q − acc_q)·dl_q, and since dl is fixed per pixel
+//! the accumulated Σ_q acc_q·dl_q follows the same recurrence as acc_q, so two scalars
+//! carry it (the oracle keeps one accumulator per channel, which is the same sum).
 //!
 //! Oracle: src/render/rasterize_backward.rs; slot layout `slot::*` there.
 
@@ -24,7 +26,6 @@
 @group(0) @binding(7) var<storage, read> px_out: array<f32>;
 @group(0) @binding(8) var<storage, read> g_px: array<f32>;
 @group(0) @binding(9) var<storage, read> g_logits: array<f32>;
-@group(0) @binding(10) var<storage, read_write> scratch: array<f32>;
 
 const S_PC: u32 = 0u;
 const S_TU: u32 = 3u;
@@ -78,9 +79,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
         da_out = g_px[gp + 4u];
         t_fin = px_out[po + 5u];
         my_last = bitcast<u32>(px_out[po + 6u]);
-        for (var j = 0u; j < 2u * ch; j++) {
-            scratch[pix * 2u * ch + j] = 0.0;
-        }
     }
     var t = t_fin;
     var acc_c = vec3<f32>(0.0);
@@ -88,6 +86,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
     var last_alpha = 0.0;
     var acc_d = 0.0;
     var last_d = 0.0;
+    // Σ_q dl_q·acc_q and Σ_q dl_q·l_q of the previous surfel.
+    var acc_l = 0.0;
+    var last_l = 0.0;
     lanes_init(li);
     // Pixels outside the view or the loss mask have my_last = 0 and use nothing. A
     // pixel uses surfel k - 1 only below its own last contributor; the walk starts at
@@ -121,19 +122,20 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
             g_rgb = w * dc;
         }
         add3(g0 + S_RGB, g_rgb);
-        let sp = pix * 2u * ch;
+        var l_dot = 0.0;
         for (var q = 0u; q < ch; q++) {
             var g_l = 0.0;
             if live {
-                let l = logits[id * ch + q];
-                let acc = last_alpha * scratch[sp + ch + q] + (1.0 - last_alpha) * scratch[sp + q];
-                scratch[sp + q] = acc;
-                scratch[sp + ch + q] = l;
                 let dl = g_logits[pix * ch + q];
-                d_alpha += (l - acc) * dl;
+                l_dot += logits[id * ch + q] * dl;
                 g_l = w * dl;
             }
             lanes_add(g0 + S_LOGITS + q, g_l);
+        }
+        if live {
+            acc_l = last_alpha * last_l + (1.0 - last_alpha) * acc_l;
+            last_l = l_dot;
+            d_alpha += l_dot - acc_l;
         }
         var g_op = 0.0;
         var g_su = 0.0;

@@ -425,8 +425,6 @@ impl GpuRasterizer {
         status: &wgpu::Buffer,
     ) {
         let n = p.count;
-        let npx = (f.width * f.height) as u64;
-        let scratch = storage(ctx, "scratch", 8 * p.channels as u64 * npx);
         enc.clear_buffer(view_grad, 0, None);
         let bg = bind(
             ctx,
@@ -442,7 +440,6 @@ impl GpuRasterizer {
                 (7, &f.px),
                 (8, g_px),
                 (9, g_logits),
-                (10, &scratch),
             ],
         );
         dispatch(

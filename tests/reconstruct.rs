@@ -130,6 +130,56 @@ fn a_non_finite_gradient_is_refused_whole_and_stops_optimisation() {
 }
 
 #[test]
+fn a_non_finite_prior_loss_stops_after_a_finite_update() {
+    // A NaN trajectory elevation: the Huber gradient clamps to a finite value, so the
+    // update goes in, but the loss sum is NaN and training stops with the model of
+    // that step, which is finite.
+    let (p, mut cam) = rogs::render::check::test_scene(3);
+    cam.exposure = [0.0, 0.0];
+    let mut reg = rogs::loss::regularise::RegData {
+        adj_start: vec![0; p.len() + 1],
+        priors: vec![[0.0; 4]; p.len()],
+        ..Default::default()
+    };
+    reg.priors[0] = [f32::NAN, 1.0, 0.0, 0.0];
+    let mut t = pollster::block_on(Trainer::new(
+        ctx(),
+        &p,
+        &reg,
+        1,
+        &TrainConfig::default(),
+        10.0,
+        5,
+    ))
+    .expect("trainer");
+    let npx = (cam.width * cam.height) as usize;
+    let target: Vec<u32> = vec![0x0080_8080; npx];
+    match pollster::block_on(t.step(&cam, 0, &target, npx)) {
+        Err(TrainError::NonFinite {
+            step: 0,
+            kept: 1,
+            what: "the loss",
+        }) => {}
+        // A GPU that propagates the NaN through the clamp refuses the update instead.
+        Err(TrainError::NonFinite {
+            step: 0,
+            kept: 0,
+            what: "a gradient",
+        }) => {}
+        other => panic!("expected a stop, got {other:?}"),
+    }
+    let kept = pollster::block_on(t.read_params()).expect("read");
+    assert!(
+        kept.pos
+            .iter()
+            .flatten()
+            .chain(&kept.logits)
+            .all(|v| v.is_finite()),
+        "the kept model is finite"
+    );
+}
+
+#[test]
 fn a_non_finite_loss_stops_optimisation_before_any_update() {
     let mut cfg = TrainConfig::default();
     cfg.loss.rgb = f32::NAN;

@@ -70,9 +70,11 @@ fn demo_reconstruction_beats_the_ipm_baseline_and_meets_measured_floors() {
     assert!(ply.1.starts_with(b"ply\nformat binary_little_endian 1.0"));
 }
 
+/// A trainer on the oracle test scene with no neighbours; `prior` may set surfel 0's
+/// priors [ẑ, q, LiDAR z, has LiDAR] to inject a bad value.
 fn nan_test_trainer(
     cfg: &TrainConfig,
-    bad_prior: bool,
+    prior: Option<[f32; 4]>,
 ) -> Result<(Trainer, Params<f32>, ViewCamera), TrainError> {
     let (p, mut cam) = rogs::render::check::test_scene(3);
     cam.exposure = [0.0, 0.0];
@@ -81,11 +83,9 @@ fn nan_test_trainer(
         priors: vec![[0.0; 4]; p.len()],
         ..Default::default()
     };
-    if bad_prior {
-        // A NaN LiDAR elevation: a NaN z gradient for one surfel, while the rendered
-        // loss stays finite.
-        reg.priors[0] = [0.0, 0.0, f32::NAN, 1.0];
-        reg.with_lidar = 1;
+    if let Some(pr) = prior {
+        reg.priors[0] = pr;
+        reg.with_lidar = (pr[3] > 0.0) as usize;
     }
     let t = pollster::block_on(Trainer::new(ctx(), &p, &reg, 1, cfg, 10.0, 5))?;
     Ok((t, p, cam))
@@ -95,14 +95,17 @@ fn nan_test_trainer(
 fn a_learning_rate_that_is_not_a_number_is_refused_up_front() {
     let mut cfg = TrainConfig::default();
     cfg.lr.logits = f32::NAN;
-    let e = nan_test_trainer(&cfg, false).err().expect("refused");
+    let e = nan_test_trainer(&cfg, None).err().expect("refused");
     assert!(matches!(e, TrainError::Settings(_)), "{e}");
     assert!(e.to_string().contains("logits learning rate"), "{e}");
 }
 
 #[test]
 fn a_non_finite_gradient_is_refused_whole_and_stops_optimisation() {
-    let (mut t, p, cam) = nan_test_trainer(&TrainConfig::default(), true).expect("trainer");
+    // A NaN LiDAR elevation: a NaN z gradient for one surfel, while the rendered loss
+    // stays finite.
+    let bad = Some([0.0, 0.0, f32::NAN, 1.0]);
+    let (mut t, p, cam) = nan_test_trainer(&TrainConfig::default(), bad).expect("trainer");
     let npx = (cam.width * cam.height) as usize;
     let target: Vec<u32> = vec![0x0080_8080; npx];
     let e = pollster::block_on(t.step(&cam, 0, &target, npx)).expect_err("NaN gradient");
@@ -134,24 +137,8 @@ fn a_non_finite_prior_loss_stops_after_a_finite_update() {
     // A NaN trajectory elevation: the Huber gradient clamps to a finite value, so the
     // update goes in, but the loss sum is NaN and training stops with the model of
     // that step, which is finite.
-    let (p, mut cam) = rogs::render::check::test_scene(3);
-    cam.exposure = [0.0, 0.0];
-    let mut reg = rogs::loss::regularise::RegData {
-        adj_start: vec![0; p.len() + 1],
-        priors: vec![[0.0; 4]; p.len()],
-        ..Default::default()
-    };
-    reg.priors[0] = [f32::NAN, 1.0, 0.0, 0.0];
-    let mut t = pollster::block_on(Trainer::new(
-        ctx(),
-        &p,
-        &reg,
-        1,
-        &TrainConfig::default(),
-        10.0,
-        5,
-    ))
-    .expect("trainer");
+    let bad = Some([f32::NAN, 1.0, 0.0, 0.0]);
+    let (mut t, _, cam) = nan_test_trainer(&TrainConfig::default(), bad).expect("trainer");
     let npx = (cam.width * cam.height) as usize;
     let target: Vec<u32> = vec![0x0080_8080; npx];
     match pollster::block_on(t.step(&cam, 0, &target, npx)) {
@@ -183,7 +170,7 @@ fn a_non_finite_prior_loss_stops_after_a_finite_update() {
 fn a_non_finite_loss_stops_optimisation_before_any_update() {
     let mut cfg = TrainConfig::default();
     cfg.loss.rgb = f32::NAN;
-    let (mut t, p, cam) = nan_test_trainer(&cfg, false).expect("trainer");
+    let (mut t, p, cam) = nan_test_trainer(&cfg, None).expect("trainer");
     let npx = (cam.width * cam.height) as usize;
     let target: Vec<u32> = vec![0x0080_8080; npx];
     let e = pollster::block_on(t.step(&cam, 0, &target, npx)).expect_err("NaN loss");

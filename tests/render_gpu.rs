@@ -54,3 +54,32 @@ fn gpu_backward_matches_the_oracle_without_subgroup_reduction() {
     run(AccumStrategy::NativeF32, false);
     run(AccumStrategy::CasU32, false);
 }
+
+#[test]
+fn gpu_timestamps_attribute_time_to_each_kernel() {
+    use rogs::gpu::timing::PassTimer;
+    use rogs::render::gpu::GpuRasterizer;
+    let c = ctx();
+    let (p, cam) = rogs::render::check::test_scene(3);
+    let r = pollster::block_on(GpuRasterizer::new(&c)).expect("pipelines");
+    let gp = GpuRasterizer::upload(&c, &p);
+    let cull = rogs::render::CullConfig::default();
+    let mut timer = PassTimer::install(&c).expect("lavapipe has TIMESTAMP_QUERY");
+    pollster::block_on(r.forward(&c, &gp, &cam, &cull)).expect("forward");
+    pollster::block_on(timer.collect(&c)).expect("collect");
+    let got = timer.sorted();
+    eprintln!("{got:?}");
+    for kernel in ["project", "radix_sort", "rasterize"] {
+        let (_, sec, passes) = got
+            .iter()
+            .find(|k| k.0 == kernel)
+            .unwrap_or_else(|| panic!("{kernel} was not timed: {got:?}"));
+        assert!(
+            *passes >= 1 && *sec > 0.0 && *sec < 60.0,
+            "{kernel}: {sec} s"
+        );
+    }
+    assert!(!got.iter().any(|k| k.0 == "rasterize_backward"), "not run");
+    drop(timer);
+    pollster::block_on(r.forward(&c, &gp, &cam, &cull)).expect("forward without a timer");
+}

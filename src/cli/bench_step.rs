@@ -40,7 +40,14 @@ pub fn run(
             pollster::block_on(timer.collect(&s.trainer.ctx)).map_err(|e| e.to_string())?;
         }
     }
-    let n = wall.len().max(1) as f64;
+    if wall.is_empty() {
+        return Err(format!(
+            "{}: only {} training view(s), nothing left to time after the warm-up step; use a bundle with more views",
+            bundle.display(),
+            s.train_views.len()
+        ));
+    }
+    let n = wall.len() as f64;
     wall.sort_by(f64::total_cmp);
     let median = wall[wall.len() / 2];
     let kernels: Vec<serde_json::Value> = timer

@@ -43,6 +43,10 @@ pub fn name(p: &wgpu::ComputePipeline, label: &str) {
 /// The query set and first index of the next pass of `p` (begin, end = index + 1),
 /// when a timer is installed and has room.
 pub fn pass_slot(p: &wgpu::ComputePipeline) -> Option<(wgpu::QuerySet, u32)> {
+    // Every dispatch passes here: without a timer, one thread-local read and out.
+    if ACTIVE.with(|a| a.borrow().is_none()) {
+        return None;
+    }
     let label = NAMES.with(|n| n.borrow().get(&key(p)).cloned())?;
     labelled_slot(&label)
 }

@@ -2,8 +2,13 @@
 //! learning rates, and one step of the view's camera exposure (a, b).
 //!
 //! Gradients are read where `project_backward` left them, in place at the head of each
-//! surfel's view-gradient slot (`grad_stride` = 18 + channels apart): position 3,
-//! rotation 4, log-scales 2, opacity, rgb 3, logits. x and y stay fixed on the grid,
+//! view candidate's view-gradient slot (`grad_stride` = 18 + channels apart):
+//! position 3, rotation 4, log-scales 2, opacity, rgb 3, logits. A surfel finds its
+//! slot through the membership words the host wrote after the z gradients in `zreg`
+//! (per 32 surfels: a bit mask of candidates and the count before them,
+//! src/render/candidates.rs); a surfel outside the view has a zero photometric
+//! gradient. Every surfel takes a step, in view or not (the regularisers' z gradient,
+//! `zreg`, and Adam's momentum move it), as dense Adam does. x and y stay fixed on the grid,
 //! so they have no moments: the moments hold m and v for the L = 11 + channels
 //! learnable slots (z, rotation 4, log-scales 2, opacity, rgb 3, logits), learnable
 //! slot k being gradient slot k + 2. They are stored slot-major (m of slot k for
@@ -55,6 +60,20 @@ struct AdamParams {
 @group(0) @binding(9) var<storage, read_write> exposure: array<f32>;
 // Non-zero when this step's update is refused.
 @group(0) @binding(10) var<storage, read_write> status: array<u32>;
+// z gradient of the regularisers per surfel (`count` floats), then the membership
+// words (mask, candidates before) per 32 surfels, as f32 bits.
+@group(0) @binding(11) var<storage, read> zreg: array<f32>;
+
+var<private> seen: bool;
+var<private> gs: u32;
+
+/// Photometric gradient slot k + 2 of this surfel (0 when the view does not see it).
+fn grad(k: u32) -> f32 {
+    if seen {
+        return grads[gs + k];
+    }
+    return 0.0;
+}
 
 /// The Adam update of `value` with gradient `g` and the moments at `mi` (m) and
 /// `mi + step` (v), which it stores.
@@ -73,21 +92,25 @@ fn update_surfel(i: u32) {
     let n = ap.count;
     // m of slot k at ms + 2k·n; its v one n further.
     let ms = i;
-    let gs = ap.grad_stride * i + 2u;
-    pos[3u * i + 2u] = adam(ms, n, pos[3u * i + 2u], grads[gs], ap.lr_z);
+    let mask = bitcast<u32>(zreg[n + 2u * (i / 32u)]);
+    let before = bitcast<u32>(zreg[n + 2u * (i / 32u) + 1u]);
+    let bit = 1u << (i % 32u);
+    seen = (mask & bit) != 0u;
+    gs = ap.grad_stride * (before + countOneBits(mask & (bit - 1u))) + 2u;
+    pos[3u * i + 2u] = adam(ms, n, pos[3u * i + 2u], zreg[i] + grad(0u), ap.lr_z);
     for (var k = 0u; k < 4u; k++) {
-        rotation[4u * i + k] = adam(ms + 2u * (1u + k) * n, n, rotation[4u * i + k], grads[gs + 1u + k], ap.lr_rotation);
+        rotation[4u * i + k] = adam(ms + 2u * (1u + k) * n, n, rotation[4u * i + k], grad(1u + k), ap.lr_rotation);
     }
     for (var k = 0u; k < 2u; k++) {
-        log_scale[2u * i + k] = adam(ms + 2u * (5u + k) * n, n, log_scale[2u * i + k], grads[gs + 5u + k], ap.lr_scale);
+        log_scale[2u * i + k] = adam(ms + 2u * (5u + k) * n, n, log_scale[2u * i + k], grad(5u + k), ap.lr_scale);
     }
-    opacity[i] = adam(ms + 14u * n, n, opacity[i], grads[gs + 7u], ap.lr_opacity);
+    opacity[i] = adam(ms + 14u * n, n, opacity[i], grad(7u), ap.lr_opacity);
     for (var k = 0u; k < 3u; k++) {
-        let c = adam(ms + 2u * (8u + k) * n, n, rgb[3u * i + k], grads[gs + 8u + k], ap.lr_rgb);
+        let c = adam(ms + 2u * (8u + k) * n, n, rgb[3u * i + k], grad(8u + k), ap.lr_rgb);
         rgb[3u * i + k] = clamp(c, 0.0, 1.0);
     }
     for (var q = 0u; q < ch; q++) {
-        logits[ch * i + q] = adam(ms + 2u * (11u + q) * n, n, logits[ch * i + q], grads[gs + 11u + q], ap.lr_logits);
+        logits[ch * i + q] = adam(ms + 2u * (11u + q) * n, n, logits[ch * i + q], grad(11u + q), ap.lr_logits);
     }
 }
 

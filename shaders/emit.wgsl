@@ -1,5 +1,6 @@
-//! emit: one (key, surfel) pair per surfel–tile overlap, at the surfel's offset from
-//! the prefix sum of tile counts. Pairs come out in surfel order; the stable radix
+//! emit: one (key, slot) pair per candidate–tile overlap, at the candidate's offset
+//! from the prefix sum of tile counts. Pairs come out in slot order, which is surfel
+//! order; the stable radix
 //! sort then orders them by key = tile index in the high bits, quantised depth in the
 //! low bits (computed exactly as `sort_key` in src/render/project.rs).
 

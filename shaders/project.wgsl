@@ -4,8 +4,9 @@
 //! surfel can reach alpha ≥ 1/255 at all (±3.5σ and ±2.5 px, see `reach_rect`), so that
 //! the compositing kernels skip far pixels of a tile with four compares instead of a
 //! ray–plane evaluation: a pure speed-up that changes no output. Writes the projected surfel and
-//! its tile count (0 when culled). One invocation per surfel, 256 per workgroup
-//! (the browser maximum), 2D grid for more than 65535 workgroups.
+//! its tile count (0 when culled). One invocation per candidate (the surfels the host
+//! found may be in the box, src/render/candidates.rs), writing at its slot; 256 per
+//! workgroup (the browser maximum), 2D grid for more than 65535 workgroups.
 //!
 //! Oracle: src/render/project.rs.
 
@@ -17,6 +18,8 @@
 @group(0) @binding(5) var<storage, read_write> proj: array<f32>;
 @group(0) @binding(6) var<storage, read_write> tile_count: array<u32>;
 @group(0) @binding(7) var<uniform> grid: vec4<u32>;
+// Slot → surfel.
+@group(0) @binding(8) var<storage, read> cand: array<u32>;
 
 fn to_cam(p: vec3<f32>) -> vec3<f32> {
     return vec3<f32>(dot(view.w2c0.xyz, p) + view.w2c0.w, dot(view.w2c1.xyz, p) + view.w2c1.w, dot(view.w2c2.xyz, p) + view.w2c2.w);
@@ -49,11 +52,12 @@ fn reach_rect(pc: vec3<f32>, tu: vec3<f32>, tv: vec3<f32>, su: f32, sv: f32, mu:
 
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let i = gid.x + gid.y * grid.x;
-    if i >= view.count {
+    let slot = gid.x + gid.y * grid.x;
+    if slot >= view.count {
         return;
     }
-    tile_count[i] = 0u;
+    tile_count[slot] = 0u;
+    let i = cand[slot];
     let pc = to_cam(vec3<f32>(pos[3u * i], pos[3u * i + 1u], pos[3u * i + 2u]));
     if pc.z < view.near || pc.z > view.far || abs(pc.x) > view.half_width {
         return;
@@ -91,7 +95,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let ty0 = u32(clamp(floor(lo.y / t), 0.0, f32(view.tiles_y)));
     let tx1 = u32(clamp(floor(hi.x / t), 0.0, f32(view.tiles_x - 1u))) + 1u;
     let ty1 = u32(clamp(floor(hi.y / t), 0.0, f32(view.tiles_y - 1u))) + 1u;
-    let o = PROJ_STRIDE * i;
+    let o = PROJ_STRIDE * slot;
     proj[o] = pc.x;
     proj[o + 1u] = pc.y;
     proj[o + 2u] = pc.z;
@@ -116,5 +120,5 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     proj[o + 20u] = reach.y;
     proj[o + 21u] = reach.z;
     proj[o + 22u] = reach.w;
-    tile_count[i] = (tx1 - tx0) * (ty1 - ty0);
+    tile_count[slot] = (tx1 - tx0) * (ty1 - ty0);
 }

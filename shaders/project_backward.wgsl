@@ -10,10 +10,11 @@
 //! lands on is written (slot k + 5 is read before slot k is written; logits move
 //! down by 5 in increasing order), so no other invocation or ordering is involved.
 //!
-//! A surfel with no tile in this view (culled or off screen) has no view gradient,
-//! and its slot is still as `encode_backward` cleared it: zero, which is also its
-//! parameter gradient, so it returns at once. In a large scene most surfels are
-//! outside any one view, and this is most of the pass.
+//! One invocation per candidate slot (src/render/candidates.rs); `cand[slot]` names
+//! the surfel whose rotation and scales it reads. A candidate with no tile in this
+//! view (culled or off screen) has no view gradient, and its slot is still as
+//! `encode_backward` cleared it: zero, which is also its parameter gradient, so it
+//! returns at once.
 //!
 //! Any gradient that is not `usable` (guard.wgsl), the surfel's or (invocation 0) the
 //! exposure's, raises `status`, and `adam` then applies nothing.
@@ -27,6 +28,7 @@
 @group(0) @binding(4) var<storage, read_write> status: array<u32>;
 @group(0) @binding(5) var<uniform> grid: vec4<u32>;
 @group(0) @binding(6) var<storage, read> tile_count: array<u32>;
+@group(0) @binding(7) var<storage, read> cand: array<u32>;
 
 var<private> ok: bool;
 
@@ -42,22 +44,24 @@ fn wt(v: vec3<f32>) -> vec3<f32> {
 
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let i = gid.x + gid.y * grid.x;
-    if i >= view.count {
-        return;
-    }
+    let slot = gid.x + gid.y * grid.x;
     let ch = view.channels;
     let vs = 18u + ch;
-    if i == 0u {
+    // Before the count test: a view with no candidates still has an exposure gradient.
+    if slot == 0u {
         let e = vs * view.count;
         if !(usable(view_grad[e]) & usable(view_grad[e + 1u])) {
             status[0] = 1u;
         }
     }
-    if tile_count[i] == 0u {
+    if slot >= view.count {
         return;
     }
-    let v = vs * i;
+    if tile_count[slot] == 0u {
+        return;
+    }
+    let i = cand[slot];
+    let v = vs * slot;
     let dpc = vec3<f32>(view_grad[v], view_grad[v + 1u], view_grad[v + 2u]);
     let dp = wt(dpc);
     let g0 = wt(vec3<f32>(view_grad[v + 3u], view_grad[v + 4u], view_grad[v + 5u]));

@@ -30,6 +30,8 @@
 @group(0) @binding(7) var<storage, read_write> out_logits: array<f32>;
 // The packed training target (class in the top byte); read only when `view.masked`.
 @group(0) @binding(8) var<storage, read> target_px: array<u32>;
+// Pairs name candidate slots; the colours and logits are the surfel's, `cand[slot]`.
+@group(0) @binding(9) var<storage, read> cand: array<u32>;
 
 var<workgroup> range: vec2<u32>;
 
@@ -73,9 +75,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
                 break;
             }
             let w = e.alpha * t;
-            c += vec3<f32>(rgb[3u * id], rgb[3u * id + 1u], rgb[3u * id + 2u]) * w;
+            let si = cand[id];
+            c += vec3<f32>(rgb[3u * si], rgb[3u * si + 1u], rgb[3u * si + 2u]) * w;
             for (var q = 0u; q < ch; q++) {
-                out_logits[pix * ch + q] += logits[id * ch + q] * w;
+                out_logits[pix * ch + q] += logits[si * ch + q] * w;
             }
             depth += s.pc.z * w;
             t = t_next;

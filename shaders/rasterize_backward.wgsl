@@ -26,6 +26,8 @@
 @group(0) @binding(7) var<storage, read> px_out: array<f32>;
 @group(0) @binding(8) var<storage, read> g_px: array<f32>;
 @group(0) @binding(9) var<storage, read> g_logits: array<f32>;
+// Pairs and view gradients are per candidate slot; colours and logits per surfel.
+@group(0) @binding(10) var<storage, read> cand: array<u32>;
 
 const S_PC: u32 = 0u;
 const S_TU: u32 = 3u;
@@ -109,13 +111,14 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
         }
         // Lanes whose pixel does not use this surfel add zeros and keep their state.
         let g0 = stride * id;
+        let si = cand[id];
         var w = 0.0;
         var d_alpha = 0.0;
         var g_rgb = vec3<f32>(0.0);
         if live {
             t = t / (1.0 - e.alpha);
             w = e.alpha * t;
-            let c = vec3<f32>(rgb[3u * id], rgb[3u * id + 1u], rgb[3u * id + 2u]);
+            let c = vec3<f32>(rgb[3u * si], rgb[3u * si + 1u], rgb[3u * si + 2u]);
             acc_c = last_alpha * last_c + (1.0 - last_alpha) * acc_c;
             last_c = c;
             d_alpha = dot(c - acc_c, dc);
@@ -127,7 +130,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
             var g_l = 0.0;
             if live {
                 let dl = g_logits[pix * ch + q];
-                l_dot += logits[id * ch + q] * dl;
+                l_dot += logits[si * ch + q] * dl;
                 g_l = w * dl;
             }
             lanes_add(g0 + S_LOGITS + q, g_l);

@@ -1,5 +1,6 @@
-//! regularise: the per-surfel terms of the loss, added to the z gradient that
-//! `project_backward` wrote (slot 2 of each surfel's `stride` floats):
+//! regularise: the per-surfel terms of the loss and their z gradient, written for
+//! every surfel to `zgrad` (`adam` adds the photometric z gradient of the surfels in
+//! the view, which `project_backward` left per candidate slot):
 //!   L_smooth = w_s Σ_{edges ij} (z_i − z_j)²        (grid neighbours, CSR)
 //!   L_traj   = w_t Σ_i q_i ρ(z_i − ẑ_i)             (ρ: Huber with width δ)
 //!   L_z      = w_z Σ_{i with LiDAR} (z_i − z_lidar,i)²
@@ -15,8 +16,8 @@
 struct RegParams {
     count: u32,
     row: u32,
-    stride: u32,
-    pad: u32,
+    pad0: u32,
+    pad1: u32,
     w_smooth: f32,
     w_traj: f32,
     huber: f32,
@@ -29,7 +30,8 @@ struct RegParams {
 @group(0) @binding(3) var<storage, read> adj: array<u32>;
 // Per surfel: ẑ, q, LiDAR z, LiDAR weight (0 or 1).
 @group(0) @binding(4) var<storage, read> priors: array<vec4<f32>>;
-@group(0) @binding(5) var<storage, read_write> grads: array<f32>;
+// z gradient per surfel (the buffer's tail holds `adam`'s membership words).
+@group(0) @binding(5) var<storage, read_write> zgrad: array<f32>;
 @group(0) @binding(6) var<storage, read_write> partial: array<f32>;
 @group(0) @binding(7) var<storage, read_write> status: array<u32>;
 
@@ -57,9 +59,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wg
         let e = z - pr.z;
         l.z = rp.w_lidar * pr.w * e * e;
         g += 2.0 * rp.w_lidar * pr.w * e;
-        let gz = grads[rp.stride * i + 2u] + g;
-        grads[rp.stride * i + 2u] = gz;
-        if !usable(gz) {
+        zgrad[i] = g;
+        if !usable(g) {
             status[0] = 1u;
         }
     }

@@ -8,6 +8,7 @@ use crate::bundle::{Bundle, Limits};
 use crate::gpu::timing::PassTimer;
 use crate::gpu::GpuContext;
 use crate::reconstruct::{ReconstructConfig, Session};
+use crate::render::gpu::view_bytes_per_candidate;
 use std::path::Path;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -32,10 +33,12 @@ pub fn run(
     pollster::block_on(s.step(&b)).map_err(|e| e.to_string())?;
     let mut timer = PassTimer::install(&s.trainer.ctx);
     let mut wall = Vec::new();
+    let mut cands = Vec::new();
     while !s.is_done() {
         let t = Instant::now();
         pollster::block_on(s.step(&b)).map_err(|e| e.to_string())?;
         wall.push(t.elapsed().as_secs_f64());
+        cands.push(s.trainer.last_candidates());
         if let Some(timer) = timer.as_mut() {
             pollster::block_on(timer.collect(&s.trainer.ctx)).map_err(|e| e.to_string())?;
         }
@@ -64,6 +67,9 @@ pub fn run(
         .filter_map(|k| k["ms_per_step"].as_f64())
         .sum();
     let views = s.train_views.len();
+    let surfels = s.prepare_report.surfels.max(1);
+    let cand_max = cands.iter().copied().max().unwrap_or(0);
+    let per_cand = view_bytes_per_candidate(s.trainer.params.channels);
     let out = serde_json::json!({
         "bench": "step",
         "bundle": bundle.display().to_string(),
@@ -79,6 +85,11 @@ pub fn run(
         "gpu_kernel_ms_per_step": if timer.is_some() { serde_json::json!(gpu_ms) } else { serde_json::Value::Null },
         "kernels": kernels,
         "bytes_per_surfel_gpu": s.bytes_per_surfel_gpu,
+        "candidates_per_view_mean": cands.iter().sum::<usize>() as f64 / n,
+        "candidates_per_view_max": cand_max,
+        "view_bytes_per_candidate": per_cand,
+        // Held between steps plus the largest view's per-candidate buffers, per surfel.
+        "peak_bytes_per_surfel_gpu": s.bytes_per_surfel_gpu + (per_cand * cand_max as u64) as f64 / surfels as f64,
     });
     println!(
         "{}",

@@ -135,7 +135,10 @@ pub async fn compare_step(ctx: GpuContext) -> Result<StepDifferences, GpuError> 
         ("traj", gl.traj, rl[1]),
         ("lidar", gl.lidar, rl[2]),
     ];
-    let (g1, e1) = t.read_grads().await?;
+    let (g1, e1) = t
+        .read_grads()
+        .await?
+        .ok_or_else(|| GpuError::Validation("no gradients after a step".into()))?;
     let zs = |p: &Params<f32>| p.pos.iter().map(|q| q[2]).collect::<Vec<f32>>();
     let f3 = |v: &[[f32; 3]]| v.iter().flatten().copied().collect::<Vec<f32>>();
     out.grads = vec![
@@ -172,7 +175,10 @@ pub async fn compare_step(ctx: GpuContext) -> Result<StepDifferences, GpuError> 
     t.step(&cam, 0, &target, mask)
         .await
         .map_err(|e| GpuError::Validation(e.to_string()))?;
-    let (g2, e2) = t.read_grads().await?;
+    let (g2, e2) = t
+        .read_grads()
+        .await?
+        .ok_or_else(|| GpuError::Validation("no gradients after a step".into()))?;
     let c2 = StepConstants::new(lr, lr.z_at(1, 4, extent), 2);
     let e = Exposure {
         value: &mut exposure,

@@ -3,9 +3,12 @@
 //! priors); per step the host uploads one packed target image and reads back the
 //! rasteriser's pair count and a few kilobytes of loss partial sums.
 //!
-//! Step: `forward` → `loss` (per-pixel gradients) → read the loss; if it is not
-//! finite, stop → `rasterize_backward` + `project_backward` (parameter gradients in
-//! place in the view gradients) → `regularise` → `adam` (surfels) and `step_exposure`
+//! Step: `forward` (on the view's candidate surfels, `render::candidates`) → `loss`
+//! (per-pixel gradients) → read the loss; if it is not finite, stop →
+//! `rasterize_backward` + `project_backward` (parameter gradients in place in the
+//! per-candidate view gradients) → `regularise` (z gradients of every surfel) →
+//! `adam` (every surfel; it finds a candidate's slot through membership words the
+//! host uploads with the candidates) and `step_exposure`
 //! (this view's camera), which apply nothing when a gradient was not usable (the
 //! status word that `project_backward` and `regularise` raise, shaders/guard.wgsl).
 //! Learning rates are checked when the trainer is made. Either way a NaN never
@@ -18,7 +21,10 @@ use crate::gpu::buffers::{bind, bytes_of, dispatch, init_storage, pipeline, stor
 use crate::gpu::readback::read_f32;
 use crate::gpu::{GpuContext, GpuError};
 use crate::loss::regularise::{RegData, RegWeights};
-use crate::render::gpu::{GpuParams, GpuRasterizer, GUARD_WGSL};
+use crate::render::candidates::membership;
+use crate::render::gpu::{
+    scatter, unpack_grads, view_grad_len, GpuParams, GpuRasterizer, GUARD_WGSL,
+};
 use crate::render::rasterize_backward::VIEW_GRAD;
 use crate::render::{Params, ViewCamera};
 use thiserror::Error;
@@ -71,8 +77,10 @@ pub struct Trainer {
     k: Kernels,
     pub params: GpuParams,
     moments: wgpu::Buffer,
-    /// View gradients, and the parameter gradients `project_backward` leaves in place.
-    view_grad: wgpu::Buffer,
+    /// The regularisers' z gradient per surfel, then the view's membership words.
+    zreg: wgpu::Buffer,
+    /// The last step's view gradients (parameter gradients in place) and candidates.
+    last: Option<(wgpu::Buffer, Vec<u32>)>,
     /// Non-zero when a gradient of the step was not usable (`adam` then applies nothing).
     status: wgpu::Buffer,
     adj_start: wgpu::Buffer,
@@ -90,11 +98,12 @@ pub struct Trainer {
 }
 
 /// Every per-surfel buffer is bound whole, so the largest (the Adam moments,
-/// 2 (11 + channels) floats per surfel, the view gradients, 18 + channels, or the
-/// projected surfels, 24) must fit the adapter's storage binding. Splitting the model into chunks is not done yet: until
-/// then a model that does not fit is refused with what to change.
+/// 2 (11 + channels) floats per surfel) must fit the adapter's storage binding; the
+/// per-view buffers hold only the view's candidates (checked per view). Splitting the
+/// model into chunks is not done yet: until then a model that does not fit is refused
+/// with what to change.
 pub fn check_fits(ctx: &GpuContext, surfels: usize, channels: usize) -> Result<(), GpuError> {
-    let per = 4 * (2 * learnable(channels)).max(24).max(VIEW_GRAD + channels) as u64;
+    let per = 4 * 2 * learnable(channels) as u64;
     let limit = ctx.limits.max_storage_buffer_binding_size;
     let need = per * surfels as u64;
     if need > limit {
@@ -152,11 +161,8 @@ impl Trainer {
         let me = Self {
             moments: storage(&ctx, "moments", 4 * (2 * slots * n + 4 * cameras as u64)),
             status: storage(&ctx, "adam_status", 4),
-            view_grad: storage(
-                &ctx,
-                "view_grad",
-                4 * ((VIEW_GRAD as u64 + p.channels as u64) * n + 2),
-            ),
+            zreg: storage(&ctx, "zreg", 4 * (n + 2 * n.div_ceil(32))),
+            last: None,
             adj_start: init_storage(&ctx, "adj_start", bytes_of(&reg.adj_start)),
             adj: init_storage(&ctx, "adj", bytes_of(&reg.adj)),
             priors: init_storage(&ctx, "priors", bytes_of(&reg.priors)),
@@ -178,8 +184,9 @@ impl Trainer {
         Ok(me)
     }
 
-    /// GPU bytes held per surfel between steps: parameters, Adam moments, view
-    /// gradients (which hold the parameter gradients too), neighbour lists and priors.
+    /// GPU bytes held per surfel between steps: parameters, Adam moments, z gradients
+    /// and membership words, neighbour lists and priors. The per-view buffers
+    /// (`view_bytes_per_candidate` per candidate) are made per step and not counted.
     pub fn bytes_per_surfel(&self) -> f64 {
         let n = self.params.count.max(1) as f64;
         let p = &self.params;
@@ -196,7 +203,7 @@ impl Trainer {
         .sum();
         let rest: u64 = [
             &self.moments,
-            &self.view_grad,
+            &self.zreg,
             &self.adj_start,
             &self.adj,
             &self.priors,
@@ -279,6 +286,11 @@ impl Trainer {
                 what: "the loss",
             });
         }
+        let n = self.params.count;
+        let view_grad = storage(ctx, "view_grad", 4 * view_grad_len(&f) as u64);
+        let words = membership(&f.cand, n as usize);
+        ctx.queue
+            .write_buffer(&self.zreg, 4 * n as u64, bytemuck::cast_slice(&words));
         let mut enc = ctx.device.create_command_encoder(&Default::default());
         enc.clear_buffer(&self.status, 0, None);
         self.raster.encode_backward(
@@ -288,17 +300,16 @@ impl Trainer {
             &f,
             &g_px,
             &g_logits,
-            &self.view_grad,
+            &view_grad,
             &self.status,
         );
-        let n = self.params.count;
         let stride = VIEW_GRAD as u32 + ch;
         let (sg, srow) = grid_1d(ctx, n);
         let w = &self.reg;
         let rp: [u32; 8] = [
             n,
             srow,
-            stride,
+            0,
             0,
             w.smooth.to_bits(),
             w.traj.to_bits(),
@@ -318,7 +329,7 @@ impl Trainer {
                 (2, &self.adj_start),
                 (3, &self.adj),
                 (4, &self.priors),
-                (5, &self.view_grad),
+                (5, &self.zreg),
                 (6, &reg_partial),
                 (7, &self.status),
             ],
@@ -347,7 +358,7 @@ impl Trainer {
             c.eps.to_bits(),
             c.bias1.to_bits(),
             c.bias2.to_bits(),
-            stride * n,
+            stride * f.cand.len() as u32,
             ch,
             0,
             0,
@@ -356,7 +367,7 @@ impl Trainer {
         let p = &self.params;
         let all = [
             (0, &au),
-            (1, &self.view_grad),
+            (1, &view_grad),
             (2, &self.moments),
             (3, &p.pos),
             (4, &p.rotation),
@@ -366,6 +377,7 @@ impl Trainer {
             (8, &p.logits),
             (9, &self.exposure),
             (10, &self.status),
+            (11, &self.zreg),
         ];
         // Auto layouts hold only what an entry uses: `main` leaves the exposure alone.
         let k = &self.k.adam;
@@ -380,6 +392,7 @@ impl Trainer {
         dispatch(&mut enc, e, &bg, (1, 1, 1));
         enc.copy_buffer_to_buffer(&self.status, 0, &reg_partial, 12 * swgs as u64, 4);
         ctx.queue.submit([enc.finish()]);
+        self.last = Some((view_grad, f.cand));
         let sums = read_f32(ctx, &reg_partial, 3 * swgs + 1).await?;
         // Out of memory or a lost device: stop with the words rather than train on.
         ctx.check()?;
@@ -409,12 +422,26 @@ impl Trainer {
     }
 
     /// The gradients of the last step (`Params` layout, regularisers included) and
-    /// its exposure gradient (d/da, d/db).
-    pub async fn read_grads(&self) -> Result<(Params<f32>, [f32; 2]), GpuError> {
+    /// its exposure gradient (d/da, d/db); `None` before the first step.
+    pub async fn read_grads(&self) -> Result<Option<(Params<f32>, [f32; 2])>, GpuError> {
+        let Some((view_grad, cand)) = &self.last else {
+            return Ok(None);
+        };
         let n = self.params.count as usize;
         let ch = self.params.channels as usize;
-        let flat = read_f32(&self.ctx, &self.view_grad, (VIEW_GRAD + ch) * n + 2).await?;
-        Ok(crate::render::gpu::unpack_grads(&flat, ch))
+        let flat = read_f32(&self.ctx, view_grad, (VIEW_GRAD + ch) * cand.len() + 2).await?;
+        let (g, e) = unpack_grads(&flat, ch);
+        let mut g = scatter(&g, cand, n);
+        let zreg = read_f32(&self.ctx, &self.zreg, n).await?;
+        for (p, z) in g.pos.iter_mut().zip(zreg) {
+            p[2] += z;
+        }
+        Ok(Some((g, e)))
+    }
+
+    /// Candidates of the last step's view (0 before the first step).
+    pub fn last_candidates(&self) -> usize {
+        self.last.as_ref().map_or(0, |l| l.1.len())
     }
 
     /// The current parameters, read back.

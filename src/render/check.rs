@@ -22,6 +22,11 @@ pub struct Differences {
 pub fn test_scene(channels: usize) -> (Params<f32>, ViewCamera) {
     let cam = road_camera(70, 50, 6.0);
     let mut p = road_patch(45, 45, 0.12, -2.7, 2.5, channels, 21).cast::<f32>();
+    // Every 7th surfel moved behind the camera: outside the view's candidates, so
+    // candidate slots differ from surfel indices.
+    for q in p.pos.iter_mut().skip(3).step_by(7) {
+        q[1] -= 12.0;
+    }
     // One surfel seen edge-on must stay finite.
     p.rotation[100] = [
         std::f32::consts::FRAC_1_SQRT_2,

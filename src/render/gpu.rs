@@ -1,13 +1,19 @@
 //! Host glue of the rasteriser kernels: buffers, pipelines and the order of passes.
 //!
-//! Forward, per view: `project` → `scan` (tile counts to offsets, total on the GPU)
-//! → `emit` (key, surfel) pairs → radix sort → `tile_ranges` → `rasterize`.
+//! Forward, per view: the host lists the view's candidate surfels (`candidates`) →
+//! `project` → `scan` (tile counts to offsets, total on the GPU) → `emit` (key,
+//! candidate) pairs → radix sort → `tile_ranges` → `rasterize`.
 //! Backward: `rasterize_backward` (camera-space gradients, accumulated with the
 //! adapter's strategy) → `project_backward` (parameter gradients).
+//!
+//! Everything per view is indexed by candidate slot, not by surfel: projected
+//! surfels, tile counts, offsets, pair values and view gradients. `cand[slot]` is the
+//! surfel, read wherever a kernel needs the model's own parameters.
 //!
 //! The pair buffers are sized from the pair count, read back once per view (4 bytes)
 //! after the scan; every other count stays on the GPU.
 
+use super::candidates::candidates;
 use super::project::tile_bits;
 use super::rasterize_backward::{OutputGrads, VIEW_GRAD};
 use super::{CullConfig, Image, Params, ViewCamera, TILE};
@@ -46,6 +52,9 @@ pub struct GpuParams {
     pub logits: wgpu::Buffer,
     pub count: u32,
     pub channels: u32,
+    /// Positions as uploaded, for the host's candidate lists (x and y never change;
+    /// z within `candidates::Z_MARGIN`).
+    pub xyz: Vec<[f32; 3]>,
 }
 
 /// Forward state kept for the backward pass.
@@ -54,9 +63,13 @@ pub struct GpuForward {
     /// contributor (u32 bits), colour before exposure 3.
     pub px: wgpu::Buffer,
     pub logits: wgpu::Buffer,
+    /// Per candidate slot: the projected surfel.
     pub proj: wgpu::Buffer,
-    /// Tiles each surfel touches (0: not in this view).
+    /// Tiles each candidate touches (0: not in this view).
     pub counts: wgpu::Buffer,
+    /// The view's candidate surfels, increasing: slot → surfel.
+    pub cand: Vec<u32>,
+    pub cand_buf: wgpu::Buffer,
     pub order: wgpu::Buffer,
     pub ranges: wgpu::Buffer,
     pub view: wgpu::Buffer,
@@ -186,6 +199,7 @@ impl GpuRasterizer {
             logits: init_storage(ctx, "logits", &flat(p.logits.clone())),
             count: p.len() as u32,
             channels: p.channels as u32,
+            xyz: p.pos.clone(),
         }
     }
 
@@ -214,7 +228,18 @@ impl GpuRasterizer {
         exposure: Option<(&wgpu::Buffer, u64)>,
         mask: Option<&wgpu::Buffer>,
     ) -> Result<GpuForward, GpuError> {
-        let n = p.count;
+        let cand = candidates(&p.xyz, cam, cull);
+        let n = cand.len() as u32;
+        let limit = ctx.limits.max_storage_buffer_binding_size;
+        let per = 4 * (24u64).max(VIEW_GRAD as u64 + p.channels as u64);
+        if per * n as u64 > limit {
+            return Err(GpuError::Validation(format!(
+                "{n} surfels in one view need {} MiB in one GPU buffer, but this adapter binds at most {} MiB: use a coarser grid (--resolution) or a shorter culling box",
+                (per * n as u64) >> 20,
+                limit >> 20
+            )));
+        }
+        let cand_buf = init_storage(ctx, "candidates", bytemuck::cast_slice(&cand));
         let bytes = view_bytes(cam, cull, n, p.channels, mask.is_some());
         let view = uniform(ctx, "view", &bytes);
         let (gx, gy) = ctx.dispatch_2d(n.div_ceil(256));
@@ -242,6 +267,7 @@ impl GpuRasterizer {
                 (5, &proj),
                 (6, &counts),
                 (7, &grid),
+                (8, &cand_buf),
             ],
         );
         dispatch(&mut enc, &self.project, &bg, (gx, gy, 1));
@@ -296,6 +322,8 @@ impl GpuRasterizer {
             logits: storage(ctx, "out_logits", 4 * ch * npx),
             proj,
             counts: counts.clone(),
+            cand,
+            cand_buf,
             order: values_a.clone(),
             ranges: ranges.clone(),
             view,
@@ -371,6 +399,7 @@ impl GpuRasterizer {
                 (6, &out.px),
                 (7, &out.logits),
                 (8, mask.unwrap_or(&ranges)),
+                (9, &out.cand_buf),
             ],
         );
         dispatch(
@@ -407,10 +436,11 @@ impl GpuRasterizer {
 
     /// Records the backward pass: per-pixel loss gradients `g_px` (GRAD_STRIDE per
     /// pixel: rgb 3, depth, alpha) and `g_logits` to `view_grad`, which this clears
-    /// first: `VIEW_GRAD + channels` floats per surfel, then the exposure gradient
-    /// d/da, d/db. `project_backward` leaves each surfel's parameter gradients at the
-    /// head of its slot (`13 + channels`: position 3, rotation 4, log-scales 2,
-    /// opacity, rgb 3, logits; `unpack_grads`). A gradient that is not usable (NaN,
+    /// first: `VIEW_GRAD + channels` floats per candidate slot (at least
+    /// `view_grad_len` floats), then the exposure gradient d/da, d/db.
+    /// `project_backward` leaves each candidate's parameter gradients at the head of
+    /// its slot (`13 + channels`: position 3, rotation 4, log-scales 2, opacity, rgb
+    /// 3, logits; `unpack_grads`). A gradient that is not usable (NaN,
     /// Inf or beyond 1e18) sets the u32 `status` to non-zero; it is not cleared here.
     #[allow(clippy::too_many_arguments)]
     pub fn encode_backward(
@@ -424,7 +454,7 @@ impl GpuRasterizer {
         view_grad: &wgpu::Buffer,
         status: &wgpu::Buffer,
     ) {
-        let n = p.count;
+        let n = f.cand.len() as u32;
         enc.clear_buffer(view_grad, 0, None);
         let bg = bind(
             ctx,
@@ -440,6 +470,7 @@ impl GpuRasterizer {
                 (7, &f.px),
                 (8, g_px),
                 (9, g_logits),
+                (10, &f.cand_buf),
             ],
         );
         dispatch(
@@ -448,6 +479,7 @@ impl GpuRasterizer {
             &bg,
             (f.width.div_ceil(TILE), f.height.div_ceil(TILE), 1),
         );
+        // dispatch_2d gives at least one workgroup: slot 0 checks the exposure gradient.
         let (gx, gy) = ctx.dispatch_2d(n.div_ceil(256));
         let grid = uniform(ctx, "grid", bytemuck::cast_slice(&[gx * 256, 0u32, 0, 0]));
         let bg = bind(
@@ -461,13 +493,15 @@ impl GpuRasterizer {
                 (4, status),
                 (5, &grid),
                 (6, &f.counts),
+                (7, &f.cand_buf),
             ],
         );
         dispatch(enc, &self.project_bwd, &bg, (gx, gy, 1));
     }
 
-    /// Parameter gradients (same layout as `Params`) and the exposure gradient, from
-    /// per-pixel loss gradients on the host (tests and benchmarks).
+    /// Parameter gradients of every surfel (same layout as `Params`, zero outside the
+    /// view) and the exposure gradient, from per-pixel loss gradients on the host
+    /// (tests and benchmarks).
     pub async fn backward(
         &self,
         ctx: &GpuContext,
@@ -475,9 +509,7 @@ impl GpuRasterizer {
         f: &GpuForward,
         g: &OutputGrads<f32>,
     ) -> Result<(Params<f32>, [f32; 2]), GpuError> {
-        let n = p.count as usize;
         let ch = p.channels as usize;
-        let stride = VIEW_GRAD + ch;
         let npx = (f.width * f.height) as usize;
         let packed: Vec<f32> = (0..npx)
             .flat_map(|i| {
@@ -492,14 +524,53 @@ impl GpuRasterizer {
             .collect();
         let g_px = init_storage(ctx, "g_px", bytemuck::cast_slice(&packed));
         let g_logits = init_storage(ctx, "g_logits", bytemuck::cast_slice(&g.logits));
-        let view_grad = storage(ctx, "view_grad", 4 * (stride * n + 2) as u64);
+        let len = view_grad_len(f);
+        let view_grad = storage(ctx, "view_grad", 4 * len as u64);
         let status = storage(ctx, "status", 4);
         let mut enc = ctx.device.create_command_encoder(&Default::default());
         self.encode_backward(ctx, &mut enc, p, f, &g_px, &g_logits, &view_grad, &status);
         ctx.queue.submit([enc.finish()]);
-        let flat = read_f32(ctx, &view_grad, stride * n + 2).await?;
-        Ok(unpack_grads(&flat, ch))
+        let flat = read_f32(ctx, &view_grad, len).await?;
+        let (g, e) = unpack_grads(&flat, ch);
+        Ok((scatter(&g, &f.cand, p.count as usize), e))
     }
+}
+
+/// GPU bytes a view holds per candidate while it is rendered and differentiated:
+/// projected surfel 24 floats, tile count, offset, the candidate itself, view
+/// gradients 18 + channels (pairs and pixels come on top, per tile and pixel).
+pub fn view_bytes_per_candidate(channels: u32) -> u64 {
+    4 * (24 + 3 + VIEW_GRAD as u64 + channels as u64)
+}
+
+/// Floats of the view-gradient buffer `encode_backward` needs for forward pass `f`.
+pub fn view_grad_len(f: &GpuForward) -> usize {
+    (VIEW_GRAD + f.channels as usize) * f.cand.len() + 2
+}
+
+/// Per-candidate values (`Params` layout, one entry per slot) placed at their surfels
+/// in a model of `n` surfels, zero elsewhere.
+pub fn scatter(g: &Params<f32>, cand: &[u32], n: usize) -> Params<f32> {
+    let ch = g.channels;
+    let mut out = Params {
+        channels: ch,
+        pos: vec![[0.0; 3]; n],
+        rotation: vec![[0.0; 4]; n],
+        log_scale: vec![[0.0; 2]; n],
+        opacity: vec![0.0; n],
+        rgb: vec![[0.0; 3]; n],
+        logits: vec![0.0; ch * n],
+    };
+    for (s, &i) in cand.iter().enumerate() {
+        let i = i as usize;
+        out.pos[i] = g.pos[s];
+        out.rotation[i] = g.rotation[s];
+        out.log_scale[i] = g.log_scale[s];
+        out.opacity[i] = g.opacity[s];
+        out.rgb[i] = g.rgb[s];
+        out.logits[ch * i..ch * (i + 1)].copy_from_slice(&g.logits[ch * s..ch * (s + 1)]);
+    }
+    out
 }
 
 /// Splits the backward pass's `view_grad` buffer, read whole, into the parameter

@@ -7,11 +7,18 @@ use rogs::gpu::GpuContext;
 use rogs::loss::regularise::{regularise, RegWeights};
 use rogs::optim::check::compare_step;
 
+/// With every moment in one binding, and in windows of 3 slots (5 `adam` passes, as a
+/// model larger than one binding takes).
 #[test]
 fn gpu_step_matches_the_oracles() {
-    let ctx =
-        GpuContext::new_blocking().unwrap_or_else(|e| panic!("GPU tests need an adapter: {e}"));
-    let d = pollster::block_on(compare_step(ctx)).expect("gpu step");
+    for window in [None, Some(3)] {
+        let ctx =
+            GpuContext::new_blocking().unwrap_or_else(|e| panic!("GPU tests need an adapter: {e}"));
+        check_step(pollster::block_on(compare_step(ctx, window)).expect("gpu step"));
+    }
+}
+
+fn check_step(d: rogs::optim::check::StepDifferences) {
     eprintln!("{d:#?}");
     for (name, gpu, cpu) in &d.losses {
         assert!(*cpu > 0.0, "{name}: the test should exercise this term");

@@ -71,11 +71,24 @@ pub fn bind(
     p: &wgpu::ComputePipeline,
     entries: &[(u32, &wgpu::Buffer)],
 ) -> wgpu::BindGroup {
+    let entries: Vec<(u32, wgpu::BufferBinding)> = entries
+        .iter()
+        .map(|(b, buf)| (*b, buf.as_entire_buffer_binding()))
+        .collect();
+    bind_ranges(ctx, p, &entries)
+}
+
+/// A bind group for group 0 of `p` from (binding, buffer range) pairs.
+pub fn bind_ranges(
+    ctx: &GpuContext,
+    p: &wgpu::ComputePipeline,
+    entries: &[(u32, wgpu::BufferBinding)],
+) -> wgpu::BindGroup {
     let entries: Vec<wgpu::BindGroupEntry> = entries
         .iter()
-        .map(|(b, buf)| wgpu::BindGroupEntry {
+        .map(|(b, range)| wgpu::BindGroupEntry {
             binding: *b,
-            resource: buf.as_entire_binding(),
+            resource: wgpu::BindingResource::Buffer(range.clone()),
         })
         .collect();
     ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {

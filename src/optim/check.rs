@@ -83,7 +83,12 @@ fn reg_data(n: usize, z: &[f32], rng: &mut Rng) -> RegData {
     }
 }
 
-pub async fn compare_step(ctx: GpuContext) -> Result<StepDifferences, GpuError> {
+/// Two GPU steps against the oracles; `moment_window` limits the learnable slots
+/// whose moments one `adam` pass binds (`None`: as many as fit, one pass here).
+pub async fn compare_step(
+    ctx: GpuContext,
+    moment_window: Option<usize>,
+) -> Result<StepDifferences, GpuError> {
     let ch = 4;
     let (p0, mut cam) = test_scene(ch);
     // The trainer's exposures start at zero on the GPU.
@@ -92,7 +97,10 @@ pub async fn compare_step(ctx: GpuContext) -> Result<StepDifferences, GpuError> 
     let mut rng = Rng::new(11);
     let z: Vec<f32> = p0.pos.iter().map(|q| q[2]).collect();
     let reg = reg_data(n, &z, &mut rng);
-    let mut cfg = TrainConfig::default();
+    let mut cfg = TrainConfig {
+        moment_window,
+        ..TrainConfig::default()
+    };
     cfg.loss.min_alpha = 0.2;
     let npx = (cam.width * cam.height) as usize;
     // Random colours; a tenth of the pixels masked out.

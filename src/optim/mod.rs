@@ -28,6 +28,10 @@ pub struct TrainConfig {
     pub holdout_every: Option<usize>,
     /// Stop after this many steps (benchmarks: time a part of an epoch).
     pub max_steps: Option<usize>,
+    /// At most this many learnable slots' moments per storage binding (tests of the
+    /// windowed Adam pass; `None`: as many as the adapter binds).
+    #[serde(skip)]
+    pub moment_window: Option<usize>,
 }
 
 impl Default for TrainConfig {
@@ -41,6 +45,7 @@ impl Default for TrainConfig {
             use_lidar: true,
             holdout_every: None,
             max_steps: None,
+            moment_window: None,
         }
     }
 }

@@ -17,7 +17,9 @@
 
 use super::adam::{learnable, StepConstants};
 use super::TrainConfig;
-use crate::gpu::buffers::{bind, bytes_of, dispatch, init_storage, pipeline, storage, uniform};
+use crate::gpu::buffers::{
+    bind, bind_ranges, bytes_of, dispatch, init_storage, pipeline, storage, uniform,
+};
 use crate::gpu::readback::read_f32;
 use crate::gpu::{GpuContext, GpuError};
 use crate::loss::regularise::{RegData, RegWeights};
@@ -76,7 +78,11 @@ pub struct Trainer {
     pub raster: GpuRasterizer,
     k: Kernels,
     pub params: GpuParams,
+    /// Adam moments, slot-major: m and v of learnable slot k at (2k, 2k + 1)·row.
     moments: wgpu::Buffer,
+    moment_row: u32,
+    /// Slot ranges whose moments fit one storage binding: one `adam` pass each.
+    windows: Vec<(u32, u32)>,
     /// The regularisers' z gradient per surfel, then the view's membership words.
     zreg: wgpu::Buffer,
     /// The last step's view gradients (parameter gradients in place) and candidates.
@@ -86,7 +92,7 @@ pub struct Trainer {
     adj_start: wgpu::Buffer,
     adj: wgpu::Buffer,
     priors: wgpu::Buffer,
-    /// (a, b) per camera.
+    /// (a, b) per camera, then their Adam moments (4 per camera).
     pub exposure: wgpu::Buffer,
     cameras: usize,
     reg: RegWeights,
@@ -97,24 +103,53 @@ pub struct Trainer {
     pub steps_done: usize,
 }
 
-/// Every per-surfel buffer is bound whole, so the largest (the Adam moments,
-/// 2 (11 + channels) floats per surfel) must fit the adapter's storage binding; the
-/// per-view buffers hold only the view's candidates (checked per view). Splitting the
-/// model into chunks is not done yet: until then a model that does not fit is refused
+/// The per-surfel buffers are bound whole, except the Adam moments, which are bound
+/// one window of slots at a time; so the largest of them (the logits, 4·channels bytes
+/// per surfel, the rotations, 16, or one slot's m and v, 8) must fit the adapter's
+/// storage binding, and the moments its largest buffer. The per-view buffers hold only
+/// the view's candidates (checked per view). A model that does not fit is refused
 /// with what to change.
 pub fn check_fits(ctx: &GpuContext, surfels: usize, channels: usize) -> Result<(), GpuError> {
-    let per = 4 * 2 * learnable(channels) as u64;
+    let advice = "use a coarser grid (--resolution), a narrower corridor (--half-width), or split the drive into shorter bundles";
+    let per = (4 * channels as u64).max(16);
     let limit = ctx.limits.max_storage_buffer_binding_size;
     let need = per * surfels as u64;
     if need > limit {
         return Err(GpuError::Validation(format!(
-            "{surfels} surfels need {} MiB in one GPU buffer, but this adapter binds at most {} MiB ({} surfels with {channels} classes): use a coarser grid (--resolution), a narrower corridor (--half-width), or split the drive into shorter bundles",
+            "{surfels} surfels need {} MiB in one GPU binding, but this adapter binds at most {} MiB ({} surfels with {channels} classes): {advice}",
             need >> 20,
             limit >> 20,
             limit / per
         )));
     }
+    let moments = 8 * learnable(channels) as u64 * surfels as u64;
+    if moments > ctx.limits.max_buffer_size {
+        return Err(GpuError::Validation(format!(
+            "{surfels} surfels need {} MiB of Adam moments in one GPU buffer, but this adapter allows at most {} MiB per buffer: {advice}",
+            moments >> 20,
+            ctx.limits.max_buffer_size >> 20
+        )));
+    }
     Ok(())
+}
+
+/// The moments' row (surfels rounded up so that every window starts at an allowed
+/// binding offset) and the slot windows [k0, k1) whose moments fit one binding, at
+/// most `cap` slots each.
+fn moment_windows(
+    ctx: &GpuContext,
+    n: u32,
+    slots: u32,
+    cap: Option<usize>,
+) -> (u32, Vec<(u32, u32)>) {
+    let align = (ctx.limits.min_storage_buffer_offset_alignment / 4).max(1);
+    let row = n.max(1).next_multiple_of(align);
+    let fit = (ctx.limits.max_storage_buffer_binding_size / (8 * row as u64)).max(1) as u32;
+    let per = fit.min(cap.map_or(u32::MAX, |c| c.max(1) as u32));
+    let windows = (0..slots.div_ceil(per))
+        .map(|w| (w * per, ((w + 1) * per).min(slots)))
+        .collect();
+    (row, windows)
 }
 
 /// A (x, y) dispatch over `n` invocations in workgroups of 256, and its row stride.
@@ -156,17 +191,20 @@ impl Trainer {
             exposure: pipeline(&ctx, "adam_exposure", &[adam_src], "step_exposure"),
         };
         let n = p.len() as u64;
-        let slots = learnable(p.channels) as u64;
+        let slots = learnable(p.channels) as u32;
+        let (moment_row, windows) = moment_windows(&ctx, n as u32, slots, cfg.moment_window);
         let params = GpuRasterizer::upload(&ctx, p);
         let me = Self {
-            moments: storage(&ctx, "moments", 4 * (2 * slots * n + 4 * cameras as u64)),
+            moments: storage(&ctx, "moments", 8 * slots as u64 * moment_row as u64),
+            moment_row,
+            windows,
             status: storage(&ctx, "adam_status", 4),
             zreg: storage(&ctx, "zreg", 4 * (n + 2 * n.div_ceil(32))),
             last: None,
             adj_start: init_storage(&ctx, "adj_start", bytes_of(&reg.adj_start)),
             adj: init_storage(&ctx, "adj", bytes_of(&reg.adj)),
             priors: init_storage(&ctx, "priors", bytes_of(&reg.priors)),
-            exposure: storage(&ctx, "exposure", 8 * cameras as u64),
+            exposure: storage(&ctx, "exposure", 24 * cameras as u64),
             cameras,
             reg: reg.weights(&cfg.loss, cfg.use_lidar),
             cfg: cfg.clone(),
@@ -341,54 +379,78 @@ impl Trainer {
             lr.z_at(step, self.total_steps, self.extent),
             step as u32 + 1,
         );
-        let au: [u32; 20] = [
-            n,
-            srow,
-            stride,
-            camera as u32,
-            c.lr_z.to_bits(),
-            c.lr_rotation.to_bits(),
-            c.lr_scale.to_bits(),
-            c.lr_opacity.to_bits(),
-            c.lr_rgb.to_bits(),
-            c.lr_logits.to_bits(),
-            c.lr_exposure.to_bits(),
-            c.beta1.to_bits(),
-            c.beta2.to_bits(),
-            c.eps.to_bits(),
-            c.bias1.to_bits(),
-            c.bias2.to_bits(),
-            stride * f.cand.len() as u32,
-            ch,
-            0,
-            0,
-        ];
-        let au = uniform(ctx, "adam_params", bytes_of(&au));
+        let au = |slots: (u32, u32)| -> [u32; 24] {
+            [
+                n,
+                srow,
+                stride,
+                camera as u32,
+                c.lr_z.to_bits(),
+                c.lr_rotation.to_bits(),
+                c.lr_scale.to_bits(),
+                c.lr_opacity.to_bits(),
+                c.lr_rgb.to_bits(),
+                c.lr_logits.to_bits(),
+                c.lr_exposure.to_bits(),
+                c.beta1.to_bits(),
+                c.beta2.to_bits(),
+                c.eps.to_bits(),
+                c.bias1.to_bits(),
+                c.bias2.to_bits(),
+                stride * f.cand.len() as u32,
+                ch,
+                self.cameras as u32,
+                self.moment_row,
+                slots.0,
+                slots.1,
+                0,
+                0,
+            ]
+        };
         let p = &self.params;
-        let all = [
-            (0, &au),
-            (1, &view_grad),
-            (2, &self.moments),
-            (3, &p.pos),
-            (4, &p.rotation),
-            (5, &p.log_scale),
-            (6, &p.opacity),
-            (7, &p.rgb),
-            (8, &p.logits),
-            (9, &self.exposure),
-            (10, &self.status),
-            (11, &self.zreg),
-        ];
-        // Auto layouts hold only what an entry uses: `main` leaves the exposure alone.
+        // One pass per window of slots whose moments fit one binding (usually one).
         let k = &self.k.adam;
-        dispatch(
-            &mut enc,
-            k,
-            &bind(ctx, k, &[&all[..9], &all[10..]].concat()),
-            sg,
-        );
+        for &(k0, k1) in &self.windows {
+            let u = uniform(ctx, "adam_params", bytes_of(&au((k0, k1))));
+            let bytes_per_slot = 8 * self.moment_row as u64;
+            let window = wgpu::BufferBinding {
+                buffer: &self.moments,
+                offset: k0 as u64 * bytes_per_slot,
+                size: std::num::NonZeroU64::new((k1 - k0) as u64 * bytes_per_slot),
+            };
+            let bg = bind_ranges(
+                ctx,
+                k,
+                &[
+                    (0, u.as_entire_buffer_binding()),
+                    (1, view_grad.as_entire_buffer_binding()),
+                    (2, window),
+                    (3, p.pos.as_entire_buffer_binding()),
+                    (4, p.rotation.as_entire_buffer_binding()),
+                    (5, p.log_scale.as_entire_buffer_binding()),
+                    (6, p.opacity.as_entire_buffer_binding()),
+                    (7, p.rgb.as_entire_buffer_binding()),
+                    (8, p.logits.as_entire_buffer_binding()),
+                    (10, self.status.as_entire_buffer_binding()),
+                    (11, self.zreg.as_entire_buffer_binding()),
+                ],
+            );
+            dispatch(&mut enc, k, &bg, sg);
+        }
+        // Auto layouts hold only what an entry uses: the exposure's step needs no
+        // surfel buffers.
+        let au = uniform(ctx, "adam_params", bytes_of(&au((0, 0))));
         let e = &self.k.exposure;
-        let bg = bind(ctx, e, &[all[0], all[1], all[2], all[9], all[10]]);
+        let bg = bind(
+            ctx,
+            e,
+            &[
+                (0, &au),
+                (1, &view_grad),
+                (9, &self.exposure),
+                (10, &self.status),
+            ],
+        );
         dispatch(&mut enc, e, &bg, (1, 1, 1));
         enc.copy_buffer_to_buffer(&self.status, 0, &reg_partial, 12 * swgs as u64, 4);
         ctx.queue.submit([enc.finish()]);

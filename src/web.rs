@@ -83,3 +83,34 @@ pub async fn gpu_info() -> Result<JsValue, JsValue> {
     }
     to_js(&ctx.report)
 }
+
+/// The rasteriser benchmark (`rogs bench raster`) in the browser: one view of the
+/// bundle `bytes` at grid `resolution` (metres), `runs` times forward and forward +
+/// backward; the figures as JSON text (scripts/bench-raster-page.mjs).
+#[wasm_bindgen]
+pub async fn bench_raster(
+    bytes: Vec<u8>,
+    frame: usize,
+    view: usize,
+    runs: usize,
+    resolution: f64,
+) -> Result<String, JsValue> {
+    use crate::render::bench::{raster_view, RasterBench};
+    let b = Bundle::from_zip_bytes(bytes, Limits::default())
+        .map_err(|e| JsValue::from_str(&e.to_string()))?;
+    let ctx = GpuContext::new()
+        .await
+        .map_err(|e| JsValue::from_str(&e.to_string()))?;
+    let o = RasterBench {
+        frame,
+        view,
+        runs,
+        resolution,
+        adaptive: true,
+    };
+    let now = || js_sys::Date::now() / 1e3;
+    let out = raster_view(&ctx, &b, &o, &now)
+        .await
+        .map_err(|e| JsValue::from_str(&e))?;
+    Ok(out.to_string())
+}

@@ -2,6 +2,7 @@
 
 use crate::bundle::{Bundle, Limits};
 use crate::init::prepare::{prepare, PrepareConfig};
+use crate::render::bench::median;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -67,11 +68,6 @@ pub enum Bench {
         #[arg(long, default_value_t = 8.0)]
         half_width: f64,
     },
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
 }
 
 pub fn run(b: Bench) -> Result<ExitCode, String> {
@@ -162,105 +158,20 @@ fn raster(
     no_subgroup_reduction: bool,
 ) -> Result<ExitCode, String> {
     use crate::gpu::GpuContext;
-    use crate::render::from_bundle::{local_origin, params, view_camera};
-    use crate::render::gpu::GpuRasterizer;
-    use crate::render::rasterize_backward::OutputGrads;
-    use crate::render::CullConfig;
+    use crate::render::bench::{raster_view, RasterBench};
     let b = Bundle::open(bundle, Limits::default(), &mut |_, _| {}).map_err(|e| e.to_string())?;
-    let mut cfg = PrepareConfig::default();
-    cfg.grid.resolution = resolution;
-    cfg.refine.enabled = !no_adaptive;
-    let p = prepare(&b, &cfg).map_err(|e| e.to_string())?;
-    let origin = local_origin(&p.grid, &p.surfels);
-    let cam =
-        view_camera(&b.manifest, frame, view, origin, [0.0, 0.0]).ok_or("no such frame or view")?;
-    let cull = CullConfig::default();
-    // Only the surfels in the view's culling box go to the GPU, as in training.
-    let all = params(&p.grid, &p.surfels, origin);
-    let keep: Vec<usize> = (0..all.len())
-        .filter(|&i| crate::render::project::project(&all, i, &cam, &cull).is_some())
-        .collect();
-    let ch = all.channels;
-    let sub = crate::render::Params {
-        pos: keep.iter().map(|&i| all.pos[i]).collect(),
-        rgb: keep.iter().map(|&i| all.rgb[i]).collect(),
-        log_scale: keep.iter().map(|&i| all.log_scale[i]).collect(),
-        opacity: keep.iter().map(|&i| all.opacity[i]).collect(),
-        rotation: keep.iter().map(|&i| all.rotation[i]).collect(),
-        logits: keep
-            .iter()
-            .flat_map(|&i| all.logits[i * ch..(i + 1) * ch].to_vec())
-            .collect(),
-        channels: ch,
-    };
     let mut ctx = GpuContext::new_blocking().map_err(|e| e.to_string())?;
     ctx.report.subgroups &= !no_subgroup_reduction;
-    let r = pollster::block_on(GpuRasterizer::new(&ctx)).map_err(|e| e.to_string())?;
-    let gp = GpuRasterizer::upload(&ctx, &sub);
-    let npx = (cam.width * cam.height) as usize;
-    let grads = OutputGrads {
-        rgb: vec![1e-3; 3 * npx],
-        logits: vec![1e-3; ch * npx],
-        depth: vec![0.0; npx],
-        alpha: vec![0.0; npx],
+    let o = RasterBench {
+        frame,
+        view,
+        runs,
+        resolution,
+        adaptive: !no_adaptive,
     };
-    let (mut fwd, mut both) = (Vec::new(), Vec::new());
-    let (mut gpu_fwd, mut gpu_both) = (Vec::new(), Vec::new());
-    let mut timer = crate::gpu::timing::PassTimer::install(&ctx);
-    // GPU seconds of the kernels recorded since the last call.
-    let gpu_time = |timer: &mut Option<crate::gpu::timing::PassTimer>| -> Result<f64, String> {
-        let Some(t) = timer.as_mut() else {
-            return Ok(0.0);
-        };
-        let before = t.total();
-        pollster::block_on(t.collect(&ctx)).map_err(|e| e.to_string())?;
-        Ok(t.total() - before)
-    };
-    let mut pairs = 0;
-    let mut evaluations = 0u64;
-    for _ in 0..runs.max(1) {
-        let t = Instant::now();
-        let f = pollster::block_on(r.forward(&ctx, &gp, &cam, &cull)).map_err(|e| e.to_string())?;
-        let _ = pollster::block_on(crate::gpu::readback::read_bytes(&ctx, &f.px, 4))
-            .map_err(|e| e.to_string())?;
-        fwd.push(t.elapsed().as_secs_f64());
-        gpu_fwd.push(gpu_time(&mut timer)?);
-        let t = Instant::now();
-        let f = pollster::block_on(r.forward(&ctx, &gp, &cam, &cull)).map_err(|e| e.to_string())?;
-        pollster::block_on(r.backward(&ctx, &gp, &f, &grads)).map_err(|e| e.to_string())?;
-        both.push(t.elapsed().as_secs_f64());
-        gpu_both.push(gpu_time(&mut timer)?);
-        pairs = f.pairs;
-        // Pixel×surfel pairs: every pair of a tile against the tile's pixels
-        // (an upper bound on evaluations: early termination skips some).
-        evaluations = pairs as u64 * (crate::render::TILE * crate::render::TILE) as u64;
-    }
-    let (tf, tb) = (median(fwd), median(both));
-    let (gf, gb) = (median(gpu_fwd), median(gpu_both));
-    let out = serde_json::json!({
-        "bench": "raster",
-        "adapter": ctx.report.name,
-        "accumulation": ctx.report.accumulation,
-        "subgroup_reduction": ctx.report.subgroups,
-        "view": {"width": cam.width, "height": cam.height, "frame": frame, "view": view},
-        "surfels_total": all.len(),
-        "surfels_in_view": sub.len(),
-        "surfel_tile_pairs": pairs,
-        "pixel_surfel_pairs": evaluations,
-        "forward_s": tf,
-        "forward_backward_s": tb,
-        "forward_pairs_per_s": evaluations as f64 / tf,
-        "forward_backward_pairs_per_s": evaluations as f64 / tb,
-        // Kernel time alone from GPU timestamps (null without TIMESTAMP_QUERY).
-        "gpu_timestamps": timer.as_ref().map(|t| serde_json::json!({
-            "forward_s": gf,
-            "forward_backward_s": gb,
-            "forward_pairs_per_s": evaluations as f64 / gf,
-            "forward_backward_pairs_per_s": evaluations as f64 / gb,
-            "kernels_s_total": t.sorted(),
-        })),
-        "runs": runs,
-    });
+    let t0 = Instant::now();
+    let now = || t0.elapsed().as_secs_f64();
+    let out = pollster::block_on(raster_view(&ctx, &b, &o, &now))?;
     println!(
         "{}",
         serde_json::to_string_pretty(&out).map_err(|e| e.to_string())?

@@ -10,6 +10,7 @@
 //! `rasterize_backward` ↔ `rasterize_backward.rs`, `project_backward` ↔
 //! `project_backward.rs`. The oracle is written to be read, not to be fast.
 
+pub mod bench;
 pub mod candidates;
 pub mod check;
 pub mod from_bundle;

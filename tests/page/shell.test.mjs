@@ -182,3 +182,24 @@ test('the demo optimises in the page; layers, pan, zoom and exports work; errors
   assert.ok(requests.every((u) => u.startsWith(base) || u.startsWith(`blob:${base}`)), requests.join('\n'));
   await page.close();
 });
+
+test('the rasteriser benchmark runs in the page (scripts/bench-raster-page.mjs)', async () => {
+  const { page, errors } = await openPage();
+  const json = await page.evaluate(async () => {
+    const m = await import('/pkg/rogs.js');
+    await m.default();
+    const bytes = new Uint8Array(await (await fetch('/demo/demo.zip')).arrayBuffer());
+    return m.bench_raster(bytes, 3, 0, 1, 0.1);
+  });
+  const r = JSON.parse(json);
+  assert.ok(r.surfels_in_view > 100 && r.surfels_in_view < r.surfels_total, json);
+  assert.ok(r.pixel_surfel_pairs > 0 && r.forward_s > 0 && r.forward_backward_s > 0, json);
+  // A frame the bundle does not have is refused in words.
+  await assert.rejects(page.evaluate(async () => {
+    const m = await import('/pkg/rogs.js');
+    const bytes = new Uint8Array(await (await fetch('/demo/demo.zip')).arrayBuffer());
+    return m.bench_raster(bytes, 100000, 0, 1, 0.1);
+  }), /no frame 100000/);
+  assert.deepEqual(errors, []);
+  await page.close();
+});

@@ -83,3 +83,14 @@ fn gpu_timestamps_attribute_time_to_each_kernel() {
     drop(timer);
     pollster::block_on(r.forward(&c, &gp, &cam, &cull)).expect("forward without a timer");
 }
+
+/// 9 000 surfels in view, so the tile counts span five blocks of the scan (2 048
+/// values each, shaders/scan.wgsl): the forward pass still equals the oracle.
+#[test]
+fn gpu_forward_matches_the_oracle_across_scan_blocks() {
+    let c = ctx();
+    let d = pollster::block_on(rogs::render::check::compare_forward_large(&c)).expect("gpu");
+    assert!(d.candidates > 4 * 2048, "{} candidates", d.candidates);
+    assert_eq!(d.pairs.0 as usize, d.pairs.1, "pair counts differ");
+    assert!(d.forward < 1e-4, "forward max abs error {}", d.forward);
+}

@@ -83,6 +83,15 @@ async fn rasteriser_matches_the_cpu_oracle_in_the_browser() {
             );
         }
     }
+    // Tile counts spanning several scan blocks (shaders/scan.wgsl).
+    let d = rogs::render::check::compare_forward_large(&ctx)
+        .await
+        .expect("gpu");
+    assert!(
+        d.candidates > 4 * 2048 && d.pairs.0 as usize == d.pairs.1,
+        "{d:?}"
+    );
+    assert!(d.forward < 1e-4, "forward max abs error {}", d.forward);
 }
 
 #[wasm_bindgen_test]

@@ -114,3 +114,32 @@ pub async fn compare(
         grads,
     })
 }
+
+/// A forward pass over more candidates than one scan block holds.
+#[derive(Debug)]
+pub struct LargeForward {
+    pub candidates: usize,
+    /// Surfel–tile pairs: GPU, oracle.
+    pub pairs: (u32, usize),
+    /// Max abs difference of colour and depth.
+    pub forward: f32,
+}
+
+/// The GPU forward pass against the oracle on a 9 000-surfel patch, whose tile
+/// counts span several blocks of the scan (shaders/scan.wgsl).
+pub async fn compare_forward_large(ctx: &GpuContext) -> Result<LargeForward, GpuError> {
+    let cam = road_camera(64, 48, 8.0);
+    let p = road_patch(60, 150, 0.05, -1.5, 2.0, 2, 5).cast::<f32>();
+    let cull = CullConfig::default();
+    let oracle = render(&p, &cam, &cull);
+    let r = GpuRasterizer::new(ctx).await?;
+    let gp = GpuRasterizer::upload(ctx, &p);
+    let f = r.forward(ctx, &gp, &cam, &cull).await?;
+    let img = GpuRasterizer::read_image(ctx, &f).await?;
+    let o = &oracle.image;
+    Ok(LargeForward {
+        candidates: f.cand.len(),
+        pairs: (f.pairs, oracle.pairs.len()),
+        forward: max_diff(&img.rgb, &o.rgb).max(max_diff(&img.depth, &o.depth)),
+    })
+}

@@ -247,10 +247,16 @@ impl GpuRasterizer {
         let proj = storage(ctx, "proj", 4 * 24 * n as u64);
         let counts = storage(ctx, "tile_count", 4 * n as u64);
         let offsets = storage(ctx, "offsets", 4 * n as u64);
-        let blocks = (gx * gy).max(1);
+        // scan.wgsl: one workgroup per block of 2048 values.
+        let (bx, by) = ctx.dispatch_2d(n.div_ceil(2048));
+        let blocks = (bx * by).max(1);
         let block_sums = storage(ctx, "block_sums", 4 * blocks as u64);
         let total = storage(ctx, "total", 16);
-        let scan_params = uniform(ctx, "scan", bytemuck::cast_slice(&[n, blocks, gx * 256, 0]));
+        let scan_params = uniform(
+            ctx,
+            "scan",
+            bytemuck::cast_slice(&[n, blocks, bx * 256, gx * 256]),
+        );
         let mut enc = ctx.device.create_command_encoder(&Default::default());
         if let Some((buf, offset)) = exposure {
             enc.copy_buffer_to_buffer(buf, offset, &view, VIEW_EXPOSURE_OFFSET, 8);
@@ -283,7 +289,7 @@ impl GpuRasterizer {
                     (4, &scan_params),
                 ],
             );
-            dispatch(&mut enc, &self.scan_blocks, &bg, (gx, gy, 1));
+            dispatch(&mut enc, &self.scan_blocks, &bg, (bx, by, 1));
         }
         let bg = bind(
             ctx,

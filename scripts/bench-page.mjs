@@ -3,26 +3,17 @@
 // www/ (build it first: wasm-pack build --release --target web --out-dir www/pkg) and
 // prints the steps, seconds per step and total time as JSON. With `steps`, it stops
 // the run after that many steps (large bundles: time per step without a whole epoch).
-import path from 'node:path';
-import { chromium } from 'playwright-core';
-import { createServer } from './serve.mjs';
+import { openBench } from './bench-browser.mjs';
 
 const [bundle, resolution = '0.1', maxSteps] = process.argv.slice(2);
 if (!bundle) {
-  console.error('usage: node scripts/bench-page.mjs BUNDLE.zip [resolution]');
+  console.error('usage: node scripts/bench-page.mjs BUNDLE.zip [resolution] [steps]');
   process.exit(2);
 }
-const root = path.resolve(import.meta.dirname, '..');
-const server = createServer([['/bench/', path.dirname(path.resolve(bundle))], ['/', path.join(root, 'www')]]);
-await new Promise((r) => server.listen(0, '127.0.0.1', r));
-const base = `http://127.0.0.1:${server.address().port}`;
-const browser = await chromium.launch({
-  executablePath: '/usr/bin/chromium',
-  args: ['--no-sandbox', '--enable-unsafe-webgpu', '--enable-features=Vulkan', '--use-vulkan=swiftshader', '--use-angle=swiftshader'],
-});
+const { base, bundleUrl, browser, close } = await openBench(bundle);
 try {
   const page = await browser.newPage();
-  await page.goto(`${base}/?url=bench/${path.basename(bundle)}`);
+  await page.goto(`${base}/?url=${bundleUrl}`);
   await page.waitForSelector('#optimise:not([hidden])', { timeout: 120_000 });
   await page.selectOption('#set-resolution', resolution);
   const t0 = Date.now();
@@ -42,6 +33,5 @@ try {
   const perStep = Number((text.match(/([\d.]+) s per step/) || [])[1]);
   console.log(JSON.stringify({ bundle, resolution: Number(resolution), steps, seconds_per_step: perStep, total_s: total, status: await page.textContent('#status'), metrics: await page.textContent('#metrics') }, null, 2));
 } finally {
-  await browser.close();
-  server.close();
+  await close();
 }

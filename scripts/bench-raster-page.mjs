@@ -3,23 +3,14 @@
 // [resolution]`. Serves www/ (build it first: wasm-pack build --release --target web
 // --out-dir www/pkg), calls the wasm export `bench_raster` in the page and prints its
 // JSON: pixel×surfel pairs per second forward and forward+backward, median of the runs.
-import path from 'node:path';
-import { chromium } from 'playwright-core';
-import { createServer } from './serve.mjs';
+import { openBench } from './bench-browser.mjs';
 
 const [bundle, frame = '0', view = '0', runs = '7', resolution = '0.05'] = process.argv.slice(2);
 if (!bundle) {
   console.error('usage: node scripts/bench-raster-page.mjs BUNDLE.zip [frame] [view] [runs] [resolution]');
   process.exit(2);
 }
-const root = path.resolve(import.meta.dirname, '..');
-const server = createServer([['/bench/', path.dirname(path.resolve(bundle))], ['/', path.join(root, 'www')]]);
-await new Promise((r) => server.listen(0, '127.0.0.1', r));
-const base = `http://127.0.0.1:${server.address().port}`;
-const browser = await chromium.launch({
-  executablePath: '/usr/bin/chromium',
-  args: ['--no-sandbox', '--enable-unsafe-webgpu', '--enable-features=Vulkan', '--use-vulkan=swiftshader', '--use-angle=swiftshader'],
-});
+const { base, bundleUrl, browser, close } = await openBench(bundle);
 try {
   const page = await browser.newPage();
   await page.goto(base);
@@ -28,12 +19,11 @@ try {
     await m.default();
     const bytes = new Uint8Array(await (await fetch(url)).arrayBuffer());
     return m.bench_raster(bytes, f, v, n, res);
-  }, [`/bench/${path.basename(bundle)}`, Number(frame), Number(view), Number(runs), Number(resolution)]);
+  }, [`/${bundleUrl}`, Number(frame), Number(view), Number(runs), Number(resolution)]);
   console.log(JSON.stringify({ browser: await browser.version(), ...JSON.parse(json) }, null, 2));
 } catch (e) {
   console.error(`bench-raster-page: ${e.message}`);
   process.exitCode = 1;
 } finally {
-  await browser.close();
-  server.close();
+  await close();
 }

@@ -1,0 +1,23 @@
+// Shared by the browser benchmarks (bench-page.mjs, bench-raster-page.mjs): serves
+// www/ and the bundle's folder under /bench/, and opens headless Chromium with WebGPU
+// on SwiftShader.
+import path from 'node:path';
+import { chromium } from 'playwright-core';
+import { createServer } from './serve.mjs';
+
+/** { base, bundleUrl, browser, close } for the bundle at path `bundle`. */
+export async function openBench(bundle) {
+  const root = path.resolve(import.meta.dirname, '..');
+  const server = createServer([['/bench/', path.dirname(path.resolve(bundle))], ['/', path.join(root, 'www')]]);
+  await new Promise((r) => server.listen(0, '127.0.0.1', r));
+  const base = `http://127.0.0.1:${server.address().port}`;
+  const browser = await chromium.launch({
+    executablePath: '/usr/bin/chromium',
+    args: ['--no-sandbox', '--enable-unsafe-webgpu', '--enable-features=Vulkan', '--use-vulkan=swiftshader', '--use-angle=swiftshader'],
+  });
+  const close = async () => {
+    await browser.close();
+    server.close();
+  };
+  return { base, bundleUrl: `bench/${path.basename(bundle)}`, browser, close };
+}

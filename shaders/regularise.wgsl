@@ -9,7 +9,13 @@
 //! surfel's gradient and needs no atomics. The LiDAR elevation per surfel comes from a
 //! lookup built once on the host, not a search per step. Each workgroup reduces the
 //! three loss sums and writes one partial triple. A z gradient that is not `usable`
-//! (guard.wgsl) raises `status`, and `adam` then applies nothing.
+//! (guard.wgsl) raises `status[0]`, and `adam` then applies nothing.
+//!
+//! It also checks the view's candidate list (src/render/candidates.rs), which the host
+//! made from positions it knew: a surfel that is not a candidate but now lies in the
+//! culling box (its z moved beyond the host's margin) raises `status[1]`, and the host
+//! then reads the positions back before the next view. The pass already reads every
+//! surfel's position, so the check costs a few instructions per surfel.
 //!
 //! Oracle: src/loss/regularise.rs.
 
@@ -33,7 +39,9 @@ struct RegParams {
 // z gradient per surfel (the buffer's tail holds `adam`'s membership words).
 @group(0) @binding(5) var<storage, read_write> zgrad: array<f32>;
 @group(0) @binding(6) var<storage, read_write> partial: array<f32>;
+// [0]: a gradient was not usable; [1]: a surfel in the box was not a candidate.
 @group(0) @binding(7) var<storage, read_write> status: array<u32>;
+@group(0) @binding(8) var<uniform> view: View;
 
 var<workgroup> red: array<vec3<f32>, 256>;
 
@@ -62,6 +70,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wg
         zgrad[i] = g;
         if !usable(g) {
             status[0] = 1u;
+        }
+        // Membership words follow the z gradients (adam.wgsl).
+        let mask = bitcast<u32>(zgrad[rp.count + 2u * (i / 32u)]);
+        if (mask & (1u << (i % 32u))) == 0u {
+            let p = vec4<f32>(pos[3u * i], pos[3u * i + 1u], z, 1.0);
+            let depth = dot(view.w2c2, p);
+            if depth >= view.near && depth <= view.far && abs(dot(view.w2c0, p)) <= view.half_width {
+                status[1] = 1u;
+            }
         }
     }
     red[li] = l;

@@ -450,6 +450,8 @@ pub fn report(s: &Session, o: &Outcome, bundle: &str) -> serde_json::Value {
             .map(|(a, b)| ((a[2] - b[2]) as f64).powi(2)).sum::<f64>()
             / o.params.len().max(1) as f64).sqrt(),
         "steps": s.steps_done(),
+        // Views that found a surfel their candidate list missed (positions re-read).
+        "position_refreshes": s.trainer.position_refreshes,
         "training_views": s.train_views.len(),
         "holdout_views": s.holdout_views.len(),
         "loss_first": first,

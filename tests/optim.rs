@@ -97,3 +97,19 @@ fn regulariser_gradient_matches_finite_differences() {
         );
     }
 }
+
+/// The candidate lists assume surfels stay within a margin of the positions the host
+/// knows; a surfel that leaves it is noticed on the GPU and the positions are re-read.
+#[test]
+fn a_surfel_the_candidate_list_missed_is_found_and_listed_next_time() {
+    let ctx =
+        GpuContext::new_blocking().unwrap_or_else(|e| panic!("GPU tests need an adapter: {e}"));
+    let d = pollster::block_on(rogs::optim::check::missed_candidate(ctx)).expect("steps");
+    eprintln!("{d:?}");
+    assert_eq!(d.refreshes, [1, 1], "refreshed once, then listed");
+    assert_eq!(d.host_z[0], 50.0);
+    assert_eq!(
+        d.host_z[1], d.gpu_z,
+        "the host now knows where the surfel is"
+    );
+}

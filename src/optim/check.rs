@@ -200,3 +200,50 @@ pub async fn compare_step(
     out.exposure = max_abs(&e[0], &exposure);
     Ok(out)
 }
+
+/// What the trainer did about a surfel its candidate list missed.
+#[derive(Debug)]
+pub struct MissedCandidate {
+    /// `Trainer::position_refreshes` after steps 1 and 2.
+    pub refreshes: [usize; 2],
+    /// The surfel's z in the host's copy: as uploaded, and after step 1.
+    pub host_z: [f32; 2],
+    /// Its z on the GPU after step 1.
+    pub gpu_z: f32,
+}
+
+/// A surfel uploaded 50 m up (out of the view's box, so no candidate) and then put back
+/// on the road on the GPU alone: the first step must notice it and read the positions
+/// back, the second must list it and need nothing.
+pub async fn missed_candidate(ctx: GpuContext) -> Result<MissedCandidate, GpuError> {
+    let (mut p0, mut cam) = test_scene(2);
+    cam.exposure = [0.0, 0.0];
+    let k = 1;
+    let road_z = p0.pos[k][2];
+    p0.pos[k][2] = 50.0;
+    let n = p0.len();
+    let z: Vec<f32> = p0.pos.iter().map(|q| q[2]).collect();
+    let reg = reg_data(n, &z, &mut Rng::new(5));
+    let to_gpu = |e: super::train::TrainError| GpuError::Validation(e.to_string());
+    let mut t = Trainer::new(ctx, &p0, &reg, 1, &TrainConfig::default(), 10.0, 4)
+        .await
+        .map_err(to_gpu)?;
+    let uploaded = t.params.xyz[k][2];
+    t.ctx.queue.write_buffer(
+        &t.params.pos,
+        4 * (3 * k as u64 + 2),
+        bytemuck::bytes_of(&road_z),
+    );
+    let npx = (cam.width * cam.height) as usize;
+    let target = vec![0x0080_8080u32; npx];
+    t.step(&cam, 0, &target, npx).await.map_err(to_gpu)?;
+    let after_one = t.position_refreshes;
+    let host_z = t.params.xyz[k][2];
+    let gpu_z = t.read_params().await?.pos[k][2];
+    t.step(&cam, 0, &target, npx).await.map_err(to_gpu)?;
+    Ok(MissedCandidate {
+        refreshes: [after_one, t.position_refreshes],
+        host_z: [uploaded, host_z],
+        gpu_z,
+    })
+}

@@ -25,7 +25,7 @@ use crate::gpu::{GpuContext, GpuError};
 use crate::loss::regularise::{RegData, RegWeights};
 use crate::render::candidates::membership;
 use crate::render::gpu::{
-    scatter, unpack_grads, view_grad_len, GpuParams, GpuRasterizer, GUARD_WGSL,
+    scatter, unpack_grads, view_grad_len, GpuParams, GpuRasterizer, GUARD_WGSL, VIEW_WGSL,
 };
 use crate::render::rasterize_backward::VIEW_GRAD;
 use crate::render::{Params, ViewCamera};
@@ -101,6 +101,9 @@ pub struct Trainer {
     extent: f32,
     total_steps: usize,
     pub steps_done: usize,
+    /// Times a view found a surfel in its box that its candidate list missed (the
+    /// host then read the positions back).
+    pub position_refreshes: usize,
 }
 
 /// The per-surfel buffers are bound whole, except the Adam moments, which are bound
@@ -184,7 +187,11 @@ impl Trainer {
             regularise: pipeline(
                 &ctx,
                 "regularise",
-                &[GUARD_WGSL, include_str!("../../shaders/regularise.wgsl")],
+                &[
+                    VIEW_WGSL,
+                    GUARD_WGSL,
+                    include_str!("../../shaders/regularise.wgsl"),
+                ],
                 "main",
             ),
             adam: pipeline(&ctx, "adam", &[adam_src], "main"),
@@ -198,7 +205,7 @@ impl Trainer {
             moments: storage(&ctx, "moments", 8 * slots as u64 * moment_row as u64),
             moment_row,
             windows,
-            status: storage(&ctx, "adam_status", 4),
+            status: storage(&ctx, "status", 8),
             zreg: storage(&ctx, "zreg", 4 * (n + 2 * n.div_ceil(32))),
             last: None,
             adj_start: init_storage(&ctx, "adj_start", bytes_of(&reg.adj_start)),
@@ -211,6 +218,7 @@ impl Trainer {
             extent,
             total_steps: total_steps.max(1),
             steps_done: 0,
+            position_refreshes: 0,
             raster,
             k,
             params,
@@ -356,8 +364,8 @@ impl Trainer {
         ];
         let rp = uniform(ctx, "reg_params", bytes_of(&rp));
         let swgs = (sg.0 * sg.1) as usize;
-        // The regulariser's partial sums, then adam's status word.
-        let reg_partial = storage(ctx, "reg_partial", 4 * (3 * swgs as u64 + 1));
+        // The regulariser's partial sums, then the two status words.
+        let reg_partial = storage(ctx, "reg_partial", 4 * (3 * swgs as u64 + 2));
         let bg = bind(
             ctx,
             &self.k.regularise,
@@ -370,6 +378,7 @@ impl Trainer {
                 (5, &self.zreg),
                 (6, &reg_partial),
                 (7, &self.status),
+                (8, &f.view),
             ],
         );
         dispatch(&mut enc, &self.k.regularise, &bg, sg);
@@ -452,10 +461,10 @@ impl Trainer {
             ],
         );
         dispatch(&mut enc, e, &bg, (1, 1, 1));
-        enc.copy_buffer_to_buffer(&self.status, 0, &reg_partial, 12 * swgs as u64, 4);
+        enc.copy_buffer_to_buffer(&self.status, 0, &reg_partial, 12 * swgs as u64, 8);
         ctx.queue.submit([enc.finish()]);
         self.last = Some((view_grad, f.cand));
-        let sums = read_f32(ctx, &reg_partial, 3 * swgs + 1).await?;
+        let sums = read_f32(ctx, &reg_partial, 3 * swgs + 2).await?;
         // Out of memory or a lost device: stop with the words rather than train on.
         ctx.check()?;
         if sums[3 * swgs].to_bits() != 0 {
@@ -471,6 +480,12 @@ impl Trainer {
             loss.lidar += s[2] as f64;
         }
         self.steps_done += 1;
+        // A surfel in the box was not a candidate: its z moved beyond the host's margin
+        // since the positions were uploaded. Learn where the surfels are now, so that
+        // the next view lists it (this step rendered without it).
+        if sums[3 * swgs + 1].to_bits() != 0 {
+            self.refresh_positions().await?;
+        }
         // Gradients were usable and the update is in, but a regulariser's loss is not
         // finite (a NaN prior can give a clamped, finite gradient): stop here too.
         if !loss.total().is_finite() {
@@ -481,6 +496,14 @@ impl Trainer {
             });
         }
         Ok(loss)
+    }
+
+    /// Reads the positions back into the host's copy that candidate lists use.
+    async fn refresh_positions(&mut self) -> Result<(), GpuError> {
+        let pos = read_f32(&self.ctx, &self.params.pos, 3 * self.params.count as usize).await?;
+        self.params.xyz = pos.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        self.position_refreshes += 1;
+        Ok(())
     }
 
     /// The gradients of the last step (`Params` layout, regularisers included) and

@@ -22,7 +22,8 @@ use crate::gpu::radix_sort::{RadixSorter, SortPairs, SortedIn};
 use crate::gpu::readback::{read_bytes, read_f32};
 use crate::gpu::{AccumStrategy, GpuContext, GpuError};
 
-const VIEW_WGSL: &str = include_str!("../../shaders/view.wgsl");
+/// The `View` uniform and the shared rasteriser declarations.
+pub const VIEW_WGSL: &str = include_str!("../../shaders/view.wgsl");
 const LOAD_SURFEL_WGSL: &str = include_str!("../../shaders/load_surfel.wgsl");
 /// `usable(x)`: the gradient test behind the optimiser's status word.
 pub const GUARD_WGSL: &str = include_str!("../../shaders/guard.wgsl");

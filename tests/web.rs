@@ -123,3 +123,20 @@ async fn optimisation_step_matches_the_oracles_in_the_browser() {
     );
     assert!(d.exposure < 1e-6);
 }
+
+#[wasm_bindgen_test]
+async fn a_surfel_the_candidate_list_missed_is_found_in_the_browser() {
+    let ctx = match GpuContext::new().await {
+        Ok(c) => c,
+        Err(e) => panic!("WebGPU adapter required: {e}"),
+    };
+    let d = rogs::optim::check::missed_candidate(ctx)
+        .await
+        .expect("steps");
+    assert_eq!(d.refreshes, [1, 1], "refreshed once, then listed: {d:?}");
+    assert_eq!(d.host_z[0], 50.0);
+    assert_eq!(
+        d.host_z[1], d.gpu_z,
+        "the host now knows where the surfel is"
+    );
+}

@@ -419,9 +419,9 @@ impl Trainer {
         let p = &self.params;
         // One pass per window of slots whose moments fit one binding (usually one).
         let k = &self.k.adam;
+        let bytes_per_slot = 8 * self.moment_row as u64;
         for &(k0, k1) in &self.windows {
             let u = uniform(ctx, "adam_params", bytes_of(&au((k0, k1))));
-            let bytes_per_slot = 8 * self.moment_row as u64;
             let window = wgpu::BufferBinding {
                 buffer: &self.moments,
                 offset: k0 as u64 * bytes_per_slot,

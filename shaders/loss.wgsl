@@ -10,6 +10,13 @@
 //! (alpha below `min_alpha`: beyond the corridor or the culling box) are skipped: no
 //! surfel there could learn from them.
 //!
+//! Two checks guard the step that follows (guard.wgsl, `adam` applies nothing when
+//! `status[0]` is raised): a loss sum that is not `usable` raises 1, and a view whose
+//! surfel–tile pairs overflowed the capacity the host gave the forward pass (`total`
+//! beyond `capacity`: the image lacks pairs) raises 2; the host then renders the view
+//! again with the exact count (src/optim/train.rs). Checking here, on the GPU, lets the
+//! whole step run without waiting for the count.
+//!
 //! Oracle: src/loss/photometric.rs.
 
 struct LossParams {
@@ -21,6 +28,10 @@ struct LossParams {
     w_rgb: f32,
     w_ce: f32,
     min_alpha: f32,
+    capacity: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> lp: LossParams;
@@ -30,6 +41,9 @@ struct LossParams {
 @group(0) @binding(4) var<storage, read_write> g_px: array<f32>;
 @group(0) @binding(5) var<storage, read_write> g_logits: array<f32>;
 @group(0) @binding(6) var<storage, read_write> partial: array<f32>;
+@group(0) @binding(7) var<storage, read_write> status: array<u32>;
+// The forward pass's pair count (scan.wgsl), before any clamping to the capacity.
+@group(0) @binding(8) var<storage, read> total: array<u32>;
 
 const PIX_STRIDE: u32 = 10u;
 const GRAD_STRIDE: u32 = 5u;
@@ -91,5 +105,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wg
         let w = wg.x + wg.y * (lp.row / 256u);
         partial[2u * w] = red[0].x;
         partial[2u * w + 1u] = red[0].y;
+        if !(usable(red[0].x) && usable(red[0].y)) {
+            status[0] = 1u;
+        }
+        if w == 0u && total[0] > lp.capacity {
+            status[0] = 2u;
+        }
     }
 }

@@ -8,13 +8,16 @@ use rogs::loss::regularise::{regularise, RegWeights};
 use rogs::optim::check::compare_step;
 
 /// With every moment in one binding, and in windows of 3 slots (5 `adam` passes, as a
-/// model larger than one binding takes).
+/// model larger than one binding takes); step 2 sized from step 1's pair count, and
+/// with too small a margin, so that its pairs overflow and it runs again.
 #[test]
 fn gpu_step_matches_the_oracles() {
-    for window in [None, Some(3)] {
+    for (window, margin, overflows) in [(None, None, 0), (Some(3), None, 0), (None, Some(0.4), 1)] {
         let ctx =
             GpuContext::new_blocking().unwrap_or_else(|e| panic!("GPU tests need an adapter: {e}"));
-        check_step(pollster::block_on(compare_step(ctx, window)).expect("gpu step"));
+        let d = pollster::block_on(compare_step(ctx, window, margin)).expect("gpu step");
+        assert_eq!(d.pair_overflows, [0, overflows], "{d:#?}");
+        check_step(d);
     }
 }
 

@@ -101,10 +101,12 @@ async fn optimisation_step_matches_the_oracles_in_the_browser() {
         Err(e) => panic!("WebGPU adapter required: {e}"),
     };
     // In 5 windows of moments: the model is small, so one would do, but a large one
-    // takes this path; the page's full runs take the single-window one.
-    let d = rogs::optim::check::compare_step(ctx, Some(3))
+    // takes this path; the page's full runs take the single-window one. Step 2's pair
+    // buffers are too small, so it overflows them once and runs again.
+    let d = rogs::optim::check::compare_step(ctx, Some(3), Some(0.4))
         .await
         .expect("gpu step");
+    assert_eq!(d.pair_overflows, [0, 1]);
     for (name, gpu, cpu) in &d.losses {
         assert!(
             *cpu > 0.0 && (gpu - cpu).abs() <= 1e-4 * cpu.abs(),

@@ -30,6 +30,8 @@ pub struct StepDifferences {
     pub moved: f32,
     /// Whether the CPU Adam applied steps 1 and 2 (it refuses non-finite updates).
     pub applied: [bool; 2],
+    /// `Trainer::pair_overflows` after steps 1 and 2.
+    pub pair_overflows: [usize; 2],
 }
 
 fn flat(p: &Params<f32>) -> Vec<f32> {
@@ -84,10 +86,13 @@ fn reg_data(n: usize, z: &[f32], rng: &mut Rng) -> RegData {
 }
 
 /// Two GPU steps against the oracles; `moment_window` limits the learnable slots
-/// whose moments one `adam` pass binds (`None`: as many as fit, one pass here).
+/// whose moments one `adam` pass binds (`None`: as many as fit, one pass here);
+/// `pair_margin` (`None`: the default) sizes step 2's pair buffers from step 1's
+/// count (below 0.5 step 2 overflows them and runs again).
 pub async fn compare_step(
     ctx: GpuContext,
     moment_window: Option<usize>,
+    pair_margin: Option<f64>,
 ) -> Result<StepDifferences, GpuError> {
     let ch = 4;
     let (p0, mut cam) = test_scene(ch);
@@ -101,6 +106,7 @@ pub async fn compare_step(
         moment_window,
         ..TrainConfig::default()
     };
+    cfg.pair_margin = pair_margin.unwrap_or(cfg.pair_margin);
     cfg.loss.min_alpha = 0.2;
     let npx = (cam.width * cam.height) as usize;
     // Random colours; a tenth of the pixels masked out.
@@ -147,6 +153,7 @@ pub async fn compare_step(
         .read_grads()
         .await?
         .ok_or_else(|| GpuError::Validation("no gradients after a step".into()))?;
+    out.pair_overflows[0] = t.pair_overflows;
     let zs = |p: &Params<f32>| p.pos.iter().map(|q| q[2]).collect::<Vec<f32>>();
     let f3 = |v: &[[f32; 3]]| v.iter().flatten().copied().collect::<Vec<f32>>();
     out.grads = vec![
@@ -187,6 +194,7 @@ pub async fn compare_step(
         .read_grads()
         .await?
         .ok_or_else(|| GpuError::Validation("no gradients after a step".into()))?;
+    out.pair_overflows[1] = t.pair_overflows;
     let c2 = StepConstants::new(lr, lr.z_at(1, 4, extent), 2);
     let e = Exposure {
         value: &mut exposure,

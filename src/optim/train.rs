@@ -1,16 +1,19 @@
 //! Host glue of one optimisation step on the GPU. Everything the step touches stays
 //! on the GPU between steps (parameters, Adam moments, exposures, neighbour lists,
-//! priors); per step the host uploads one packed target image and reads back the
-//! rasteriser's pair count and a few kilobytes of loss partial sums.
+//! priors); per step the host uploads one packed target image and, once the whole
+//! step is queued, reads back a few kilobytes: loss partial sums, status words and the
+//! view's pair count. It does not wait for the GPU in the middle of a step.
 //!
-//! Step: `forward` (on the view's candidate surfels, `render::candidates`) → `loss`
-//! (per-pixel gradients) → read the loss; if it is not finite, stop →
-//! `rasterize_backward` + `project_backward` (parameter gradients in place in the
-//! per-candidate view gradients) → `regularise` (z gradients of every surfel) →
-//! `adam` (every surfel; it finds a candidate's slot through membership words the
-//! host uploads with the candidates) and `step_exposure`
-//! (this view's camera), which apply nothing when a gradient was not usable (the
-//! status word that `project_backward` and `regularise` raise, shaders/guard.wgsl).
+//! Step: `forward` (on the view's candidate surfels, `render::candidates`, with pair
+//! buffers sized from the pairs per candidate seen so far) → `loss` (per-pixel
+//! gradients) → `rasterize_backward` + `project_backward` (parameter gradients in
+//! place in the per-candidate view gradients) → `regularise` (z gradients of every
+//! surfel) → `adam` (every surfel; it finds a candidate's slot through membership
+//! words the host uploads with the candidates) and `step_exposure` (this view's
+//! camera), which apply nothing when the status word is raised: by `loss` when the
+//! loss is not finite or the pairs overflowed their capacity, by `project_backward`
+//! and `regularise` when a gradient was not usable (shaders/guard.wgsl). An overflow
+//! (rare: the capacity has a margin) runs the step again with the exact count.
 //! Learning rates are checked when the trainer is made. Either way a NaN never
 //! reaches the model, so the last good model is the current one and no copy of it is
 //! kept.
@@ -104,6 +107,18 @@ pub struct Trainer {
     /// Times a view found a surfel in its box that its candidate list missed (the
     /// host then read the positions back).
     pub position_refreshes: usize,
+    /// The most surfel–tile pairs per candidate a view has had: sizes the next view's
+    /// pair buffers (0: unknown, the first view reads its count back).
+    pairs_per_candidate: f64,
+    /// Steps run again because their pairs overflowed the capacity.
+    pub pair_overflows: usize,
+}
+
+/// What one try of a step ended with.
+enum Try {
+    Done(StepLoss),
+    /// The pairs overflowed the capacity; nothing was applied.
+    Overflow,
 }
 
 /// The per-surfel buffers are bound whole, except the Adam moments, which are bound
@@ -181,7 +196,7 @@ impl Trainer {
             loss: pipeline(
                 &ctx,
                 "loss",
-                &[include_str!("../../shaders/loss.wgsl")],
+                &[GUARD_WGSL, include_str!("../../shaders/loss.wgsl")],
                 "main",
             ),
             regularise: pipeline(
@@ -219,6 +234,8 @@ impl Trainer {
             total_steps: total_steps.max(1),
             steps_done: 0,
             position_refreshes: 0,
+            pairs_per_candidate: 0.0,
+            pair_overflows: 0,
             raster,
             k,
             params,
@@ -269,10 +286,41 @@ impl Trainer {
         target: &[u32],
         mask_count: usize,
     ) -> Result<StepLoss, TrainError> {
+        let target = init_storage(&self.ctx, "target", bytes_of(target));
+        let mut capacity = self.pair_capacity();
+        loop {
+            match self
+                .try_step(cam, camera, &target, mask_count, capacity)
+                .await?
+            {
+                Try::Done(loss) => return Ok(loss),
+                Try::Overflow => {
+                    self.pair_overflows += 1;
+                    capacity = None;
+                }
+            }
+        }
+    }
+
+    /// Pairs per candidate to size the next view's pair buffers for: the most seen ×
+    /// the margin; `None` (read the count back) before the first view.
+    fn pair_capacity(&self) -> Option<f64> {
+        (self.pairs_per_candidate > 0.0).then(|| self.pairs_per_candidate * self.cfg.pair_margin)
+    }
+
+    /// The step with pair buffers for `capacity` pairs per candidate (`None`: the exact
+    /// count, read back).
+    async fn try_step(
+        &mut self,
+        cam: &ViewCamera,
+        camera: usize,
+        target: &wgpu::Buffer,
+        mask_count: usize,
+        capacity: Option<f64>,
+    ) -> Result<Try, TrainError> {
         let ctx = &self.ctx;
         let ch = self.params.channels;
         let camera = camera.min(self.cameras.saturating_sub(1));
-        let target = init_storage(ctx, "target", bytes_of(target));
         // Only the loss's pixels are composited: the rest would get no gradient.
         let f = self
             .raster
@@ -282,12 +330,13 @@ impl Trainer {
                 cam,
                 &self.cfg.cull,
                 Some((&self.exposure, 8 * camera as u64)),
-                Some(&target),
+                Some(target),
+                capacity,
             )
             .await?;
         let npx = cam.width * cam.height;
         let (groups, row) = grid_1d(ctx, npx);
-        let lp: [u32; 8] = [
+        let lp: [u32; 12] = [
             cam.width,
             cam.height,
             ch,
@@ -296,6 +345,10 @@ impl Trainer {
             self.cfg.loss.rgb.to_bits(),
             self.cfg.loss.ce.to_bits(),
             self.cfg.loss.min_alpha.to_bits(),
+            f.capacity,
+            0,
+            0,
+            0,
         ];
         let lp = uniform(ctx, "loss_params", bytes_of(&lp));
         let g_px = storage(ctx, "g_px", 4 * 5 * npx as u64);
@@ -303,6 +356,7 @@ impl Trainer {
         let wgs = (groups.0 * groups.1) as usize;
         let partial = storage(ctx, "loss_partial", 8 * wgs as u64);
         let mut enc = ctx.device.create_command_encoder(&Default::default());
+        enc.clear_buffer(&self.status, 0, None);
         let bg = bind(
             ctx,
             &self.k.loss,
@@ -310,35 +364,21 @@ impl Trainer {
                 (0, &lp),
                 (1, &f.px),
                 (2, &f.logits),
-                (3, &target),
+                (3, target),
                 (4, &g_px),
                 (5, &g_logits),
                 (6, &partial),
+                (7, &self.status),
+                (8, &f.total),
             ],
         );
         dispatch(&mut enc, &self.k.loss, &bg, groups);
-        ctx.queue.submit([enc.finish()]);
-        let sums = read_f32(ctx, &partial, 2 * wgs).await?;
-        let mut loss = StepLoss::default();
-        for s in sums.chunks_exact(2) {
-            loss.rgb += s[0] as f64;
-            loss.ce += s[1] as f64;
-        }
         let step = self.steps_done;
-        if !loss.total().is_finite() {
-            return Err(TrainError::NonFinite {
-                step,
-                kept: step,
-                what: "the loss",
-            });
-        }
         let n = self.params.count;
         let view_grad = storage(ctx, "view_grad", 4 * view_grad_len(&f) as u64);
         let words = membership(&f.cand, n as usize);
         ctx.queue
             .write_buffer(&self.zreg, 4 * n as u64, bytemuck::cast_slice(&words));
-        let mut enc = ctx.device.create_command_encoder(&Default::default());
-        enc.clear_buffer(&self.status, 0, None);
         self.raster.encode_backward(
             ctx,
             &mut enc,
@@ -364,8 +404,10 @@ impl Trainer {
         ];
         let rp = uniform(ctx, "reg_params", bytes_of(&rp));
         let swgs = (sg.0 * sg.1) as usize;
-        // The regulariser's partial sums, then the two status words.
-        let reg_partial = storage(ctx, "reg_partial", 4 * (3 * swgs as u64 + 2));
+        // Read back at the end: the regulariser's partial sums, the two status words,
+        // the pair count and the loss's partial sums.
+        let tail = 3 * swgs;
+        let readback = storage(ctx, "step_readback", 4 * (tail + 3 + 2 * wgs) as u64);
         let bg = bind(
             ctx,
             &self.k.regularise,
@@ -376,7 +418,7 @@ impl Trainer {
                 (3, &self.adj),
                 (4, &self.priors),
                 (5, &self.zreg),
-                (6, &reg_partial),
+                (6, &readback),
                 (7, &self.status),
                 (8, &f.view),
             ],
@@ -461,20 +503,41 @@ impl Trainer {
             ],
         );
         dispatch(&mut enc, e, &bg, (1, 1, 1));
-        enc.copy_buffer_to_buffer(&self.status, 0, &reg_partial, 12 * swgs as u64, 8);
+        let at = |k: usize| 4 * k as u64;
+        enc.copy_buffer_to_buffer(&self.status, 0, &readback, at(tail), 8);
+        enc.copy_buffer_to_buffer(&f.total, 0, &readback, at(tail + 2), 4);
+        enc.copy_buffer_to_buffer(&partial, 0, &readback, at(tail + 3), at(2 * wgs));
         ctx.queue.submit([enc.finish()]);
-        self.last = Some((view_grad, f.cand));
-        let sums = read_f32(ctx, &reg_partial, 3 * swgs + 2).await?;
+        let sums = read_f32(ctx, &readback, tail + 3 + 2 * wgs).await?;
         // Out of memory or a lost device: stop with the words rather than train on.
         ctx.check()?;
-        if sums[3 * swgs].to_bits() != 0 {
+        let pairs = sums[tail + 2].to_bits();
+        if !f.cand.is_empty() {
+            let per = pairs as f64 / f.cand.len() as f64;
+            self.pairs_per_candidate = self.pairs_per_candidate.max(per);
+        }
+        if pairs > f.capacity {
+            return Ok(Try::Overflow);
+        }
+        self.last = Some((view_grad, f.cand));
+        let mut loss = StepLoss::default();
+        for s in sums[tail + 3..].chunks_exact(2) {
+            loss.rgb += s[0] as f64;
+            loss.ce += s[1] as f64;
+        }
+        if sums[tail].to_bits() != 0 {
+            let what = if loss.total().is_finite() {
+                "a gradient"
+            } else {
+                "the loss"
+            };
             return Err(TrainError::NonFinite {
                 step,
                 kept: step,
-                what: "a gradient",
+                what,
             });
         }
-        for s in sums[..3 * swgs].chunks_exact(3) {
+        for s in sums[..tail].chunks_exact(3) {
             loss.smooth += s[0] as f64;
             loss.traj += s[1] as f64;
             loss.lidar += s[2] as f64;
@@ -483,7 +546,7 @@ impl Trainer {
         // A surfel in the box was not a candidate: its z moved beyond the host's margin
         // since the positions were uploaded. Learn where the surfels are now, so that
         // the next view lists it (this step rendered without it).
-        if sums[3 * swgs + 1].to_bits() != 0 {
+        if sums[tail + 1].to_bits() != 0 {
             self.refresh_positions().await?;
         }
         // Gradients were usable and the update is in, but a regulariser's loss is not
@@ -495,7 +558,7 @@ impl Trainer {
                 what: "the loss",
             });
         }
-        Ok(loss)
+        Ok(Try::Done(loss))
     }
 
     /// Reads the positions back into the host's copy that candidate lists use.

@@ -99,7 +99,7 @@ pub async fn raster_view(
         r.backward(ctx, &gp, &f, &grads).await.map_err(err)?;
         both.push(now() - t);
         gpu_both.push(gpu_seconds(ctx, &mut timer).await?);
-        pairs = f.pairs;
+        pairs = f.pairs.unwrap_or(0);
     }
     // Pixel×surfel pairs: every pair of a tile against the tile's pixels (an upper
     // bound on evaluations: early termination skips some).

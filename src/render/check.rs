@@ -110,7 +110,7 @@ pub async fn compare(
     ];
     Ok(Differences {
         forward,
-        pairs: (f.pairs, oracle.pairs.len()),
+        pairs: (f.pairs.unwrap_or(0), oracle.pairs.len()),
         grads,
     })
 }
@@ -139,7 +139,7 @@ pub async fn compare_forward_large(ctx: &GpuContext) -> Result<LargeForward, Gpu
     let o = &oracle.image;
     Ok(LargeForward {
         candidates: f.cand.len(),
-        pairs: (f.pairs, oracle.pairs.len()),
+        pairs: (f.pairs.unwrap_or(0), oracle.pairs.len()),
         forward: max_diff(&img.rgb, &o.rgb).max(max_diff(&img.depth, &o.depth)),
     })
 }

@@ -74,7 +74,12 @@ pub struct GpuForward {
     pub order: wgpu::Buffer,
     pub ranges: wgpu::Buffer,
     pub view: wgpu::Buffer,
-    pub pairs: u32,
+    /// The surfel–tile pair count, when it was read back (`forward`); with a capacity
+    /// (`forward_with`) it stays on the GPU in `total[0]`, and the pairs beyond
+    /// `capacity` were dropped: the caller must check and render again if so.
+    pub pairs: Option<u32>,
+    pub total: wgpu::Buffer,
+    pub capacity: u32,
     pub width: u32,
     pub height: u32,
     pub channels: u32,
@@ -211,14 +216,19 @@ impl GpuRasterizer {
         cam: &ViewCamera,
         cull: &CullConfig,
     ) -> Result<GpuForward, GpuError> {
-        self.forward_with(ctx, p, cam, cull, None, None).await
+        self.forward_with(ctx, p, cam, cull, None, None, None).await
     }
 
     /// The forward pass; with `exposure` = (buffer, byte offset), the view's exposure
     /// (a, b) is copied on the GPU from there instead of taken from `cam`, so that an
     /// optimiser can keep it on the GPU. With `mask` (a packed training target,
     /// `loss::targets`), only the pixels inside the loss mask are composited; the
-    /// others read as empty (training needs nothing else from them).
+    /// others read as empty (training needs nothing else from them). With `capacity`
+    /// (pairs per candidate), the pair buffers hold that many pairs per candidate and
+    /// the count is not read back, so the
+    /// whole pass is encoded without waiting for the GPU: the caller compares `total`
+    /// with the capacity afterwards (the kernels clamp to it, so an overflow gives a
+    /// wrong image, never an out-of-bounds access).
     #[allow(clippy::too_many_arguments)]
     pub async fn forward_with(
         &self,
@@ -228,6 +238,7 @@ impl GpuRasterizer {
         cull: &CullConfig,
         exposure: Option<(&wgpu::Buffer, u64)>,
         mask: Option<&wgpu::Buffer>,
+        capacity: Option<f64>,
     ) -> Result<GpuForward, GpuError> {
         let cand = candidates(&p.xyz, cam, cull);
         let n = cand.len() as u32;
@@ -307,15 +318,28 @@ impl GpuRasterizer {
             dispatch(&mut enc, &self.add_offsets, &bg, (gx, gy, 1));
         }
         ctx.queue.submit([enc.finish()]);
-        let t = read_bytes(ctx, &total, 4).await?;
-        let pairs = u32::from_le_bytes([t[0], t[1], t[2], t[3]]);
         let max_pairs = ctx.limits.max_storage_buffer_binding_size / 4;
-        if pairs as u64 > max_pairs {
-            return Err(GpuError::Validation(format!(
-                "{pairs} surfel-tile pairs exceed the adapter's storage binding of {max_pairs} u32; render smaller views or fewer surfels"
-            )));
+        let pairs = match capacity {
+            Some(_) => None,
+            None => {
+                let t = read_bytes(ctx, &total, 4).await?;
+                let pairs = u32::from_le_bytes([t[0], t[1], t[2], t[3]]);
+                if pairs as u64 > max_pairs {
+                    return Err(GpuError::Validation(format!(
+                        "{pairs} surfel-tile pairs exceed the adapter's storage binding of {max_pairs} u32; render smaller views or fewer surfels"
+                    )));
+                }
+                Some(pairs)
+            }
+        };
+        // A few pairs on top, so that a view of few candidates has room for a surfel
+        // that covers more tiles than any seen.
+        let cap = match (capacity, pairs) {
+            (_, Some(p)) => p as u64,
+            (Some(per), None) => (per * n as f64).ceil() as u64 + 256,
+            (None, None) => 0,
         }
-        let cap = pairs.max(1);
+        .clamp(1, max_pairs.min(u32::MAX as u64)) as u32;
         let keys_a = storage(ctx, "keys_a", 4 * cap as u64);
         let values_a = storage(ctx, "values_a", 4 * cap as u64);
         let keys_b = storage(ctx, "keys_b", 4 * cap as u64);
@@ -335,6 +359,8 @@ impl GpuRasterizer {
             ranges: ranges.clone(),
             view,
             pairs,
+            total: total.clone(),
+            capacity: cap,
             width: cam.width,
             height: cam.height,
             channels: p.channels,

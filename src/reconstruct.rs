@@ -452,6 +452,8 @@ pub fn report(s: &Session, o: &Outcome, bundle: &str) -> serde_json::Value {
         "steps": s.steps_done(),
         // Views that found a surfel their candidate list missed (positions re-read).
         "position_refreshes": s.trainer.position_refreshes,
+        // Steps whose surfel-tile pairs overflowed the buffers sized for them (run again).
+        "pair_overflows": s.trainer.pair_overflows,
         "training_views": s.train_views.len(),
         "holdout_views": s.holdout_views.len(),
         "loss_first": first,

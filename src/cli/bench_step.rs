@@ -88,6 +88,7 @@ pub fn run(
         "candidates_per_view_mean": cands.iter().sum::<usize>() as f64 / n,
         "candidates_per_view_max": cand_max,
         "view_bytes_per_candidate": per_cand,
+        "pair_overflows": s.trainer.pair_overflows,
         // Held between steps plus the largest view's per-candidate buffers, per surfel.
         "peak_bytes_per_surfel_gpu": s.bytes_per_surfel_gpu + (per_cand * cand_max as u64) as f64 / surfels as f64,
     });

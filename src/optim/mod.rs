@@ -32,9 +32,9 @@ pub struct TrainConfig {
     /// windowed Adam pass; `None`: as many as the adapter binds).
     #[serde(skip)]
     pub moment_window: Option<usize>,
-    /// A view's pair buffers hold the most pairs per candidate seen so far × this, so
-    /// that a step needs no read-back of its pair count (train.rs); a view with more
-    /// runs again with the exact count. Below 1 only in tests, to force that.
+    /// A view's pair buffers hold the most pairs its camera's views have had × this,
+    /// so that a step needs no read-back of its pair count (train.rs); a view with
+    /// more runs again with the exact count. Below 1 only in tests, to force that.
     pub pair_margin: f64,
 }
 

@@ -107,9 +107,12 @@ pub struct Trainer {
     /// Times a view found a surfel in its box that its candidate list missed (the
     /// host then read the positions back).
     pub position_refreshes: usize,
-    /// The most surfel–tile pairs per candidate a view has had: sizes the next view's
-    /// pair buffers (0: unknown, the first view reads its count back).
-    pairs_per_candidate: f64,
+    /// Per camera, the most surfel–tile pairs a view has had: sizes the camera's next
+    /// pair buffers (0: unknown, its first view reads the count back). Per camera,
+    /// because the count follows the image and how the camera sees the road (on
+    /// `demo` 130–155 k for the front camera, 14–26 k for the side ones); per
+    /// candidate it is not stable (the candidates' box holds much that no camera sees).
+    pairs_seen: Vec<u32>,
     /// Steps run again because their pairs overflowed the capacity.
     pub pair_overflows: usize,
 }
@@ -234,7 +237,7 @@ impl Trainer {
             total_steps: total_steps.max(1),
             steps_done: 0,
             position_refreshes: 0,
-            pairs_per_candidate: 0.0,
+            pairs_seen: vec![0; cameras.max(1)],
             pair_overflows: 0,
             raster,
             k,
@@ -287,7 +290,8 @@ impl Trainer {
         mask_count: usize,
     ) -> Result<StepLoss, TrainError> {
         let target = init_storage(&self.ctx, "target", bytes_of(target));
-        let mut capacity = self.pair_capacity();
+        let camera = camera.min(self.cameras.saturating_sub(1));
+        let mut capacity = self.pair_capacity(camera);
         loop {
             match self
                 .try_step(cam, camera, &target, mask_count, capacity)
@@ -302,25 +306,25 @@ impl Trainer {
         }
     }
 
-    /// Pairs per candidate to size the next view's pair buffers for: the most seen ×
-    /// the margin; `None` (read the count back) before the first view.
-    fn pair_capacity(&self) -> Option<f64> {
-        (self.pairs_per_candidate > 0.0).then(|| self.pairs_per_candidate * self.cfg.pair_margin)
+    /// Pairs to size a view of `camera` for: the most seen × the margin; `None` (read
+    /// the count back) before the camera's first view.
+    fn pair_capacity(&self, camera: usize) -> Option<u32> {
+        let seen = self.pairs_seen[camera] as f64;
+        (seen > 0.0).then(|| (seen * self.cfg.pair_margin).ceil().min(u32::MAX as f64) as u32)
     }
 
-    /// The step with pair buffers for `capacity` pairs per candidate (`None`: the exact
-    /// count, read back).
+    /// The step with pair buffers for `capacity` pairs (`None`: the exact count, read
+    /// back).
     async fn try_step(
         &mut self,
         cam: &ViewCamera,
         camera: usize,
         target: &wgpu::Buffer,
         mask_count: usize,
-        capacity: Option<f64>,
+        capacity: Option<u32>,
     ) -> Result<Try, TrainError> {
         let ctx = &self.ctx;
         let ch = self.params.channels;
-        let camera = camera.min(self.cameras.saturating_sub(1));
         // Only the loss's pixels are composited: the rest would get no gradient.
         let f = self
             .raster
@@ -512,10 +516,8 @@ impl Trainer {
         // Out of memory or a lost device: stop with the words rather than train on.
         ctx.check()?;
         let pairs = sums[tail + 2].to_bits();
-        if !f.cand.is_empty() {
-            let per = pairs as f64 / f.cand.len() as f64;
-            self.pairs_per_candidate = self.pairs_per_candidate.max(per);
-        }
+        let seen = &mut self.pairs_seen[camera];
+        *seen = (*seen).max(pairs);
         if pairs > f.capacity {
             return Ok(Try::Overflow);
         }

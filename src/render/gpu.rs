@@ -223,9 +223,8 @@ impl GpuRasterizer {
     /// (a, b) is copied on the GPU from there instead of taken from `cam`, so that an
     /// optimiser can keep it on the GPU. With `mask` (a packed training target,
     /// `loss::targets`), only the pixels inside the loss mask are composited; the
-    /// others read as empty (training needs nothing else from them). With `capacity`
-    /// (pairs per candidate), the pair buffers hold that many pairs per candidate and
-    /// the count is not read back, so the
+    /// others read as empty (training needs nothing else from them). With `capacity`,
+    /// the pair buffers hold that many pairs and the count is not read back, so the
     /// whole pass is encoded without waiting for the GPU: the caller compares `total`
     /// with the capacity afterwards (the kernels clamp to it, so an overflow gives a
     /// wrong image, never an out-of-bounds access).
@@ -238,7 +237,7 @@ impl GpuRasterizer {
         cull: &CullConfig,
         exposure: Option<(&wgpu::Buffer, u64)>,
         mask: Option<&wgpu::Buffer>,
-        capacity: Option<f64>,
+        capacity: Option<u32>,
     ) -> Result<GpuForward, GpuError> {
         let cand = candidates(&p.xyz, cam, cull);
         let n = cand.len() as u32;
@@ -332,14 +331,9 @@ impl GpuRasterizer {
                 Some(pairs)
             }
         };
-        // A few pairs on top, so that a view of few candidates has room for a surfel
-        // that covers more tiles than any seen.
-        let cap = match (capacity, pairs) {
-            (_, Some(p)) => p as u64,
-            (Some(per), None) => (per * n as f64).ceil() as u64 + 256,
-            (None, None) => 0,
-        }
-        .clamp(1, max_pairs.min(u32::MAX as u64)) as u32;
+        let cap = capacity
+            .or(pairs)
+            .map_or(1, |c| (c as u64).clamp(1, max_pairs) as u32);
         let keys_a = storage(ctx, "keys_a", 4 * cap as u64);
         let values_a = storage(ctx, "values_a", 4 * cap as u64);
         let keys_b = storage(ctx, "keys_b", 4 * cap as u64);

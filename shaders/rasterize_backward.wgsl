@@ -1,17 +1,25 @@
 //! rasterize_backward: the forward kernel's pairs traversed back to front. One
-//! workgroup per 8×8 tile, one invocation per pixel, each walking its tile's list back
-//! from its own `last` contributor (so surfels behind its termination are never read),
-//! recovering transmittance by division (alpha ≤ 0.99 keeps it stable), and adding its
-//! share of each camera-space gradient with `lanes_add`: summed over the subgroup
-//! first where the adapter has subgroups (lanes_subgroup.wgsl, the lanes walking in
-//! step), then `accum_add` (native f32 atomics, or CAS in browsers; `accum` is bound
-//! at 0 by the prepended snippet). Pixels read the list
+//! workgroup per 8×8 tile; each invocation owns two pixels of a column (rows 2j and
+//! 2j + 1), walks its tile's list back from the later of their `last` contributors
+//! (so surfels behind both terminations are never read), recovers each pixel's
+//! transmittance by division (alpha ≤ 0.99 keeps it stable), and adds the two
+//! pixels' summed share of each camera-space gradient with `lanes_add`: summed over
+//! the subgroup first where the adapter has subgroups (lanes_subgroup.wgsl, the lanes
+//! walking in step), then `accum_add` (native f32 atomics, or CAS in browsers;
+//! `accum` is bound at 0 by the prepended snippet).
+//!
+//! Why two pixels per invocation: the adds are what this pass costs where there are
+//! no float atomics (a compare-and-swap loop per value, 18 + channels values per
+//! surfel) and, with subgroups, the reductions; neighbouring pixels share most
+//! surfels, so summing two in registers halves both, and the surfel's projected
+//! parameters, colour and logits are loaded once for two pixels. Pixels read the list
 //! straight from storage: on lavapipe, staging batches in workgroup memory behind
-//! barriers was no faster. The exposure gradient is reduced over the workgroup first,
-//! then added once. The logits (runtime channel count) need no per-pixel accumulators:
-//! their share of dL/dalpha is Σ_q (l_q − acc_q)·dl_q, and since dl is fixed per pixel
-//! the accumulated Σ_q acc_q·dl_q follows the same recurrence as acc_q, so two scalars
-//! carry it (the oracle keeps one accumulator per channel, which is the same sum).
+//! barriers was no faster. The exposure gradient is reduced over the workgroup
+//! first, then added once. The logits (runtime channel count) need no per-pixel
+//! accumulators: their share of dL/dalpha is Σ_q (l_q − acc_q)·dl_q, and since dl is
+//! fixed per pixel the accumulated Σ_q acc_q·dl_q follows the same recurrence as
+//! acc_q, so two scalars carry it (the oracle keeps one accumulator per channel,
+//! which is the same sum).
 //!
 //! Oracle: src/render/rasterize_backward.rs; slot layout `slot::*` there.
 
@@ -40,7 +48,43 @@ const S_RGB: u32 = 15u;
 const S_LOGITS: u32 = 18u;
 
 var<workgroup> range: vec2<u32>;
-var<workgroup> red: array<vec2<f32>, 64>;
+var<workgroup> red: array<vec2<f32>, 32>;
+
+/// One pixel's loss gradients and its state along the walk.
+struct Pixel {
+    pix: u32,
+    at: vec2<f32>,
+    dc: vec3<f32>,
+    dd: f32,
+    da_out: f32,
+    t_fin: f32,
+    // Its last contributor + 1 (0: outside the view or the loss mask, uses nothing).
+    last: u32,
+    t: f32,
+    acc_c: vec3<f32>,
+    last_c: vec3<f32>,
+    last_alpha: f32,
+    acc_d: f32,
+    last_d: f32,
+    // Σ_q dl_q·acc_q and Σ_q dl_q·l_q of the previous surfel.
+    acc_l: f32,
+    last_l: f32,
+    // This surfel: its weight and dL/dalpha so far.
+    w: f32,
+    d_alpha: f32,
+}
+
+/// A surfel's camera-space gradients from one or more pixels.
+struct Share {
+    rgb: vec3<f32>,
+    op: f32,
+    su: f32,
+    sv: f32,
+    tu: vec3<f32>,
+    tv: vec3<f32>,
+    n: vec3<f32>,
+    pc: vec3<f32>,
+}
 
 fn add3(base: u32, v: vec3<f32>) {
     lanes_add(base, v.x);
@@ -48,148 +92,188 @@ fn add3(base: u32, v: vec3<f32>) {
     lanes_add(base + 2u, v.z);
 }
 
-@compute @workgroup_size(8, 8)
+fn start_pixel(x: u32, y: u32, gain: f32, dexp: ptr<function, vec2<f32>>) -> Pixel {
+    var p: Pixel;
+    p.at = vec2<f32>(f32(x) + 0.5, f32(y) + 0.5);
+    p.t = 1.0;
+    p.t_fin = 1.0;
+    if x < view.width && y < view.height {
+        p.pix = y * view.width + x;
+        let gp = GRAD_STRIDE * p.pix;
+        let po = PIX_STRIDE * p.pix;
+        let go = vec3<f32>(g_px[gp], g_px[gp + 1u], g_px[gp + 2u]);
+        p.dc = gain * go;
+        let col = vec3<f32>(px_out[po + 7u], px_out[po + 8u], px_out[po + 9u]);
+        *dexp += vec2<f32>(dot(go * gain, col), go.x + go.y + go.z);
+        p.dd = g_px[gp + 3u];
+        p.da_out = g_px[gp + 4u];
+        p.t_fin = px_out[po + 5u];
+        p.t = p.t_fin;
+        p.last = bitcast<u32>(px_out[po + 6u]);
+    }
+    return p;
+}
+
+/// Whether pixel `p` uses the surfel at list position k - 1 (with `e` evaluated).
+fn uses(p: Pixel, k: u32, reach: vec4<f32>) -> bool {
+    return k <= p.last && !out_of_reach(reach, p.at.x, p.at.y);
+}
+
+/// Colour step of a used surfel: transmittance, weight, colour term of dL/dalpha.
+fn colour(p: ptr<function, Pixel>, alpha: f32, c: vec3<f32>) {
+    (*p).t = (*p).t / (1.0 - alpha);
+    (*p).w = alpha * (*p).t;
+    (*p).acc_c = (*p).last_alpha * (*p).last_c + (1.0 - (*p).last_alpha) * (*p).acc_c;
+    (*p).last_c = c;
+    (*p).d_alpha = dot(c - (*p).acc_c, (*p).dc);
+}
+
+/// The rest of a used surfel's gradients from pixel `p`, with `l_dot` = Σ_q l_q·dl_q.
+fn geometry(p: ptr<function, Pixel>, s: Surfel, e: Eval, l_dot: f32) -> Share {
+    var g: Share;
+    let w = (*p).w;
+    g.rgb = w * (*p).dc;
+    (*p).acc_l = (*p).last_alpha * (*p).last_l + (1.0 - (*p).last_alpha) * (*p).acc_l;
+    (*p).last_l = l_dot;
+    var d_alpha = (*p).d_alpha + l_dot - (*p).acc_l;
+    (*p).acc_d = (*p).last_alpha * (*p).last_d + (1.0 - (*p).last_alpha) * (*p).acc_d;
+    (*p).last_d = s.pc.z;
+    d_alpha += (s.pc.z - (*p).acc_d) * (*p).dd;
+    d_alpha = d_alpha * (*p).t + (*p).t_fin / (1.0 - e.alpha) * (*p).da_out;
+    (*p).last_alpha = e.alpha;
+    g.pc = vec3<f32>(0.0, 0.0, w * (*p).dd);
+    if e.raw_alpha <= MAX_ALPHA {
+        let sig = s.opacity;
+        g.op = d_alpha * e.g * sig * (1.0 - sig);
+        let d_rho = d_alpha * sig * -0.5 * e.g;
+        if e.ray_hit {
+            let gu = d_rho * 2.0 * e.u;
+            let gv = d_rho * 2.0 * e.v;
+            g.su = -gu * e.u / s.su;
+            g.sv = -gv * e.v / s.sv;
+            g.tu = gu * e.q / s.su;
+            g.tv = gv * e.q / s.sv;
+            let gq = gu * s.tu / s.su + gv * s.tv / s.sv;
+            let nd = dot(s.n, e.d);
+            let d_lambda = dot(gq, e.d);
+            g.pc += -gq + d_lambda * s.n / nd;
+            g.n = d_lambda * (s.pc - e.d * e.lambda) / nd;
+        } else {
+            let k2 = -2.0 * LOWPASS_INV_SQ * d_rho;
+            let dmu = k2 * e.delta;
+            let z = s.pc.z;
+            g.pc += vec3<f32>(dmu.x * view.fx / z, dmu.y * view.fy / z, -(dmu.x * view.fx * s.pc.x + dmu.y * view.fy * s.pc.y) / (z * z));
+        }
+    }
+    return g;
+}
+
+fn plus(a: Share, b: Share) -> Share {
+    var g: Share;
+    g.rgb = a.rgb + b.rgb;
+    g.op = a.op + b.op;
+    g.su = a.su + b.su;
+    g.sv = a.sv + b.sv;
+    g.tu = a.tu + b.tu;
+    g.tv = a.tv + b.tv;
+    g.n = a.n + b.n;
+    g.pc = a.pc + b.pc;
+    return g;
+}
+
+@compute @workgroup_size(8, 4)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>, @builtin(local_invocation_index) li: u32) {
     let tile = wg.x + wg.y * view.tiles_x;
     let x = wg.x * TILE + lid.x;
-    let y = wg.y * TILE + lid.y;
-    let inside = x < view.width && y < view.height;
-    let pix = y * view.width + x;
+    let y = wg.y * TILE + 2u * lid.y;
     let ch = view.channels;
     let stride = S_LOGITS + ch;
     if li == 0u {
         range = vec2<u32>(ranges[2u * tile], ranges[2u * tile + 1u]);
     }
     let r = workgroupUniformLoad(&range);
-    let px = f32(x) + 0.5;
-    let py = f32(y) + 0.5;
     let gain = exp(view.exposure_a);
-    var dc = vec3<f32>(0.0);
     var dexp = vec2<f32>(0.0);
-    var dd = 0.0;
-    var t_fin = 1.0;
-    var da_out = 0.0;
-    var my_last = 0u;
-    if inside {
-        let gp = GRAD_STRIDE * pix;
-        let po = PIX_STRIDE * pix;
-        let go = vec3<f32>(g_px[gp], g_px[gp + 1u], g_px[gp + 2u]);
-        dc = gain * go;
-        let col = vec3<f32>(px_out[po + 7u], px_out[po + 8u], px_out[po + 9u]);
-        dexp = vec2<f32>(dot(go * gain, col), go.x + go.y + go.z);
-        dd = g_px[gp + 3u];
-        da_out = g_px[gp + 4u];
-        t_fin = px_out[po + 5u];
-        my_last = bitcast<u32>(px_out[po + 6u]);
-    }
-    var t = t_fin;
-    var acc_c = vec3<f32>(0.0);
-    var last_c = vec3<f32>(0.0);
-    var last_alpha = 0.0;
-    var acc_d = 0.0;
-    var last_d = 0.0;
-    // Σ_q dl_q·acc_q and Σ_q dl_q·l_q of the previous surfel.
-    var acc_l = 0.0;
-    var last_l = 0.0;
+    var a = start_pixel(x, y, gain, &dexp);
+    var b = start_pixel(x, y + 1u, gain, &dexp);
     lanes_init(li);
-    // Pixels outside the view or the loss mask have my_last = 0 and use nothing. A
-    // pixel uses surfel k - 1 only below its own last contributor; the walk starts at
-    // the highest bound among the lanes so that they stay in step (lanes_*.wgsl).
-    let hi = lanes_max(max(my_last, r.x));
+    // The walk starts at the highest bound among the lanes so that they stay in step
+    // (lanes_*.wgsl); a pixel uses surfel k - 1 only below its own last contributor.
+    let hi = lanes_max(max(max(a.last, b.last), r.x));
     for (var k = hi; k > r.x; k--) {
         let id = order[k - 1u];
-        var live = k <= my_last && !out_of_reach(load_reach(id), px, py);
+        let reach = load_reach(id);
+        var live_a = uses(a, k, reach);
+        var live_b = uses(b, k, reach);
         var s: Surfel;
-        var e: Eval;
-        if live {
+        var ea: Eval;
+        var eb: Eval;
+        if live_a || live_b {
             s = load_surfel(id);
-            e = eval_surfel(s, px, py, view);
-            live = e.alpha >= MIN_ALPHA;
+            if live_a {
+                ea = eval_surfel(s, a.at.x, a.at.y, view);
+                live_a = ea.alpha >= MIN_ALPHA;
+            }
+            if live_b {
+                eb = eval_surfel(s, b.at.x, b.at.y, view);
+                live_b = eb.alpha >= MIN_ALPHA;
+            }
         }
-        if !lanes_any(live) {
+        if !lanes_any(live_a || live_b) {
             continue;
         }
-        // Lanes whose pixel does not use this surfel add zeros and keep their state.
+        // Lanes whose pixels do not use this surfel add zeros and keep their state.
         let g0 = stride * id;
         let si = cand[id];
-        var w = 0.0;
-        var d_alpha = 0.0;
-        var g_rgb = vec3<f32>(0.0);
-        if live {
-            t = t / (1.0 - e.alpha);
-            w = e.alpha * t;
-            let c = vec3<f32>(rgb[3u * si], rgb[3u * si + 1u], rgb[3u * si + 2u]);
-            acc_c = last_alpha * last_c + (1.0 - last_alpha) * acc_c;
-            last_c = c;
-            d_alpha = dot(c - acc_c, dc);
-            g_rgb = w * dc;
+        var c = vec3<f32>(0.0);
+        if live_a || live_b {
+            c = vec3<f32>(rgb[3u * si], rgb[3u * si + 1u], rgb[3u * si + 2u]);
         }
-        add3(g0 + S_RGB, g_rgb);
-        var l_dot = 0.0;
+        if live_a {
+            colour(&a, ea.alpha, c);
+        }
+        if live_b {
+            colour(&b, eb.alpha, c);
+        }
+        var dot_a = 0.0;
+        var dot_b = 0.0;
         for (var q = 0u; q < ch; q++) {
             var g_l = 0.0;
-            if live {
-                let dl = g_logits[pix * ch + q];
-                l_dot += logits[si * ch + q] * dl;
-                g_l = w * dl;
+            if live_a || live_b {
+                let l = logits[si * ch + q];
+                if live_a {
+                    let dl = g_logits[a.pix * ch + q];
+                    dot_a += l * dl;
+                    g_l += a.w * dl;
+                }
+                if live_b {
+                    let dl = g_logits[b.pix * ch + q];
+                    dot_b += l * dl;
+                    g_l += b.w * dl;
+                }
             }
             lanes_add(g0 + S_LOGITS + q, g_l);
         }
-        if live {
-            acc_l = last_alpha * last_l + (1.0 - last_alpha) * acc_l;
-            last_l = l_dot;
-            d_alpha += l_dot - acc_l;
+        var g: Share;
+        if live_a {
+            g = geometry(&a, s, ea, dot_a);
         }
-        var g_op = 0.0;
-        var g_su = 0.0;
-        var g_sv = 0.0;
-        var g_tu = vec3<f32>(0.0);
-        var g_tv = vec3<f32>(0.0);
-        var g_n = vec3<f32>(0.0);
-        var dpc = vec3<f32>(0.0);
-        if live {
-            acc_d = last_alpha * last_d + (1.0 - last_alpha) * acc_d;
-            last_d = s.pc.z;
-            d_alpha += (s.pc.z - acc_d) * dd;
-            d_alpha = d_alpha * t + t_fin / (1.0 - e.alpha) * da_out;
-            last_alpha = e.alpha;
-            dpc = vec3<f32>(0.0, 0.0, w * dd);
-            if e.raw_alpha <= MAX_ALPHA {
-                let sig = s.opacity;
-                g_op = d_alpha * e.g * sig * (1.0 - sig);
-                let d_rho = d_alpha * sig * -0.5 * e.g;
-                if e.ray_hit {
-                    let gu = d_rho * 2.0 * e.u;
-                    let gv = d_rho * 2.0 * e.v;
-                    g_su = -gu * e.u / s.su;
-                    g_sv = -gv * e.v / s.sv;
-                    g_tu = gu * e.q / s.su;
-                    g_tv = gv * e.q / s.sv;
-                    let gq = gu * s.tu / s.su + gv * s.tv / s.sv;
-                    let nd = dot(s.n, e.d);
-                    let d_lambda = dot(gq, e.d);
-                    dpc += -gq + d_lambda * s.n / nd;
-                    g_n = d_lambda * (s.pc - e.d * e.lambda) / nd;
-                } else {
-                    let k2 = -2.0 * LOWPASS_INV_SQ * d_rho;
-                    let dmu = k2 * e.delta;
-                    let z = s.pc.z;
-                    dpc += vec3<f32>(dmu.x * view.fx / z, dmu.y * view.fy / z, -(dmu.x * view.fx * s.pc.x + dmu.y * view.fy * s.pc.y) / (z * z));
-                }
-            }
+        if live_b {
+            g = plus(g, geometry(&b, s, eb, dot_b));
         }
-        lanes_add(g0 + S_OPACITY, g_op);
-        lanes_add(g0 + S_SU, g_su);
-        lanes_add(g0 + S_SV, g_sv);
-        add3(g0 + S_TU, g_tu);
-        add3(g0 + S_TV, g_tv);
-        add3(g0 + S_N, g_n);
-        add3(g0 + S_PC, dpc);
+        add3(g0 + S_RGB, g.rgb);
+        lanes_add(g0 + S_OPACITY, g.op);
+        lanes_add(g0 + S_SU, g.su);
+        lanes_add(g0 + S_SV, g.sv);
+        add3(g0 + S_TU, g.tu);
+        add3(g0 + S_TV, g.tv);
+        add3(g0 + S_N, g.n);
+        add3(g0 + S_PC, g.pc);
     }
     // The exposure gradient: one add per workgroup instead of one per pixel.
     red[li] = dexp;
     workgroupBarrier();
-    for (var off = 32u; off > 0u; off = off / 2u) {
+    for (var off = 16u; off > 0u; off = off / 2u) {
         if li < off {
             red[li] += red[li + off];
         }

@@ -93,7 +93,7 @@ fn add3(base: u32, v: vec3<f32>) {
 }
 
 fn start_pixel(x: u32, y: u32, gain: f32, dexp: ptr<function, vec2<f32>>) -> Pixel {
-    var p: Pixel;
+    var p = Pixel();
     p.at = vec2<f32>(f32(x) + 0.5, f32(y) + 0.5);
     p.t = 1.0;
     p.t_fin = 1.0;
@@ -130,7 +130,7 @@ fn colour(p: ptr<function, Pixel>, alpha: f32, c: vec3<f32>) {
 
 /// The rest of a used surfel's gradients from pixel `p`, with `l_dot` = Σ_q l_q·dl_q.
 fn geometry(p: ptr<function, Pixel>, s: Surfel, e: Eval, l_dot: f32) -> Share {
-    var g: Share;
+    var g = Share();
     let w = (*p).w;
     g.rgb = w * (*p).dc;
     (*p).acc_l = (*p).last_alpha * (*p).last_l + (1.0 - (*p).last_alpha) * (*p).acc_l;
@@ -169,7 +169,7 @@ fn geometry(p: ptr<function, Pixel>, s: Surfel, e: Eval, l_dot: f32) -> Share {
 }
 
 fn plus(a: Share, b: Share) -> Share {
-    var g: Share;
+    var g = Share();
     g.rgb = a.rgb + b.rgb;
     g.op = a.op + b.op;
     g.su = a.su + b.su;
@@ -254,7 +254,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
             }
             lanes_add(g0 + S_LOGITS + q, g_l);
         }
-        var g: Share;
+        // Explicitly zero: Chromium (Tint on SwiftShader) kept the previous iteration's
+        // value of a `var g: Share;` declared in this loop, which WGSL zeroes.
+        var g = Share();
         if live_a {
             g = geometry(&a, s, ea, dot_a);
         }

@@ -1,18 +1,20 @@
 //! rasterize_backward: the forward kernel's pairs traversed back to front. One
-//! workgroup per 8×8 tile; each invocation owns two pixels of a column (rows 2j and
-//! 2j + 1), walks its tile's list back from the later of their `last` contributors
-//! (so surfels behind both terminations are never read), recovers each pixel's
+//! workgroup per 8×8 tile; each invocation owns four pixels of a column (rows 4j to
+//! 4j + 3), walks its tile's list back from the latest of their `last` contributors
+//! (so surfels behind every termination are never read), recovers each pixel's
 //! transmittance by division (alpha ≤ 0.99 keeps it stable), and adds the two
 //! pixels' summed share of each camera-space gradient with `lanes_add`: summed over
 //! the subgroup first where the adapter has subgroups (lanes_subgroup.wgsl, the lanes
 //! walking in step), then `accum_add` (native f32 atomics, or CAS in browsers;
 //! `accum` is bound at 0 by the prepended snippet).
 //!
-//! Why two pixels per invocation: the adds are what this pass costs where there are
+//! Why four pixels per invocation: the adds are what this pass costs where there are
 //! no float atomics (a compare-and-swap loop per value, 18 + channels values per
 //! surfel) and, with subgroups, the reductions; neighbouring pixels share most
-//! surfels, so summing two in registers halves both, and the surfel's projected
-//! parameters, colour and logits are loaded once for two pixels. Pixels read the list
+//! surfels, so summing four in registers divides both by up to four, and the surfel's
+//! projected parameters, colour and logits are loaded once for four pixels. The four
+//! are named variables, not an array: SwiftShader keeps an indexed array in memory,
+//! and that cost more than the adds it saved (measured in docs/PERFORMANCE.md). Pixels read the list
 //! straight from storage: on lavapipe, staging batches in workgroup memory behind
 //! barriers was no faster. The exposure gradient is reduced over the workgroup
 //! first, then added once. The logits (runtime channel count) need no per-pixel
@@ -48,9 +50,9 @@ const S_RGB: u32 = 15u;
 const S_LOGITS: u32 = 18u;
 
 var<workgroup> range: vec2<u32>;
-var<workgroup> red: array<vec2<f32>, 32>;
+var<workgroup> red: array<vec2<f32>, 16>;
 
-/// One pixel's loss gradients and its state along the walk.
+/// One pixel's loss gradients, its state along the walk and the current surfel.
 struct Pixel {
     pix: u32,
     at: vec2<f32>,
@@ -69,9 +71,13 @@ struct Pixel {
     // Σ_q dl_q·acc_q and Σ_q dl_q·l_q of the previous surfel.
     acc_l: f32,
     last_l: f32,
-    // This surfel: its weight and dL/dalpha so far.
+    // The current surfel: whether the pixel uses it, its evaluation, weight, dL/dalpha
+    // so far and Σ_q l_q·dl_q.
+    live: bool,
+    e: Eval,
     w: f32,
     d_alpha: f32,
+    l_dot: f32,
 }
 
 /// A surfel's camera-space gradients from one or more pixels.
@@ -114,13 +120,28 @@ fn start_pixel(x: u32, y: u32, gain: f32, dexp: ptr<function, vec2<f32>>) -> Pix
     return p;
 }
 
-/// Whether pixel `p` uses the surfel at list position k - 1 (with `e` evaluated).
-fn uses(p: Pixel, k: u32, reach: vec4<f32>) -> bool {
-    return k <= p.last && !out_of_reach(reach, p.at.x, p.at.y);
+/// Whether pixel `p` may use the surfel at list position k - 1 (the reach test).
+fn reach_test(p: ptr<function, Pixel>, k: u32, reach: vec4<f32>) -> bool {
+    (*p).live = k <= (*p).last && !out_of_reach(reach, (*p).at.x, (*p).at.y);
+    return (*p).live;
+}
+
+/// Evaluates the surfel where the reach test passed; whether the pixel uses it.
+fn evaluate(p: ptr<function, Pixel>, s: Surfel) -> bool {
+    if (*p).live {
+        (*p).e = eval_surfel(s, (*p).at.x, (*p).at.y, view);
+        (*p).live = (*p).e.alpha >= MIN_ALPHA;
+    }
+    return (*p).live;
 }
 
 /// Colour step of a used surfel: transmittance, weight, colour term of dL/dalpha.
-fn colour(p: ptr<function, Pixel>, alpha: f32, c: vec3<f32>) {
+fn colour(p: ptr<function, Pixel>, c: vec3<f32>) {
+    (*p).l_dot = 0.0;
+    if !(*p).live {
+        return;
+    }
+    let alpha = (*p).e.alpha;
     (*p).t = (*p).t / (1.0 - alpha);
     (*p).w = alpha * (*p).t;
     (*p).acc_c = (*p).last_alpha * (*p).last_c + (1.0 - (*p).last_alpha) * (*p).acc_c;
@@ -128,14 +149,29 @@ fn colour(p: ptr<function, Pixel>, alpha: f32, c: vec3<f32>) {
     (*p).d_alpha = dot(c - (*p).acc_c, (*p).dc);
 }
 
-/// The rest of a used surfel's gradients from pixel `p`, with `l_dot` = Σ_q l_q·dl_q.
-fn geometry(p: ptr<function, Pixel>, s: Surfel, e: Eval, l_dot: f32) -> Share {
+/// Channel q's logit `l` of a used surfel: adds l·dl to Σ_q l_q·dl_q and returns the
+/// logit's gradient from this pixel.
+fn logit(p: ptr<function, Pixel>, q: u32, l: f32) -> f32 {
+    if !(*p).live {
+        return 0.0;
+    }
+    let dl = g_logits[(*p).pix * view.channels + q];
+    (*p).l_dot += l * dl;
+    return (*p).w * dl;
+}
+
+/// The rest of a used surfel's gradients from pixel `p` (zero where it is not used).
+fn geometry(p: ptr<function, Pixel>, s: Surfel) -> Share {
     var g = Share();
+    if !(*p).live {
+        return g;
+    }
+    let e = (*p).e;
     let w = (*p).w;
     g.rgb = w * (*p).dc;
     (*p).acc_l = (*p).last_alpha * (*p).last_l + (1.0 - (*p).last_alpha) * (*p).acc_l;
-    (*p).last_l = l_dot;
-    var d_alpha = (*p).d_alpha + l_dot - (*p).acc_l;
+    (*p).last_l = (*p).l_dot;
+    var d_alpha = (*p).d_alpha + (*p).l_dot - (*p).acc_l;
     (*p).acc_d = (*p).last_alpha * (*p).last_d + (1.0 - (*p).last_alpha) * (*p).acc_d;
     (*p).last_d = s.pc.z;
     d_alpha += (s.pc.z - (*p).acc_d) * (*p).dd;
@@ -169,7 +205,7 @@ fn geometry(p: ptr<function, Pixel>, s: Surfel, e: Eval, l_dot: f32) -> Share {
 }
 
 fn plus(a: Share, b: Share) -> Share {
-    var g = Share();
+    var g: Share;
     g.rgb = a.rgb + b.rgb;
     g.op = a.op + b.op;
     g.su = a.su + b.su;
@@ -181,11 +217,11 @@ fn plus(a: Share, b: Share) -> Share {
     return g;
 }
 
-@compute @workgroup_size(8, 4)
+@compute @workgroup_size(8, 2)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>, @builtin(local_invocation_index) li: u32) {
     let tile = wg.x + wg.y * view.tiles_x;
     let x = wg.x * TILE + lid.x;
-    let y = wg.y * TILE + 2u * lid.y;
+    let y = wg.y * TILE + 4u * lid.y;
     let ch = view.channels;
     let stride = S_LOGITS + ch;
     if li == 0u {
@@ -196,73 +232,45 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
     var dexp = vec2<f32>(0.0);
     var a = start_pixel(x, y, gain, &dexp);
     var b = start_pixel(x, y + 1u, gain, &dexp);
+    var c = start_pixel(x, y + 2u, gain, &dexp);
+    var d = start_pixel(x, y + 3u, gain, &dexp);
     lanes_init(li);
     // The walk starts at the highest bound among the lanes so that they stay in step
     // (lanes_*.wgsl); a pixel uses surfel k - 1 only below its own last contributor.
-    let hi = lanes_max(max(max(a.last, b.last), r.x));
+    let hi = lanes_max(max(max(max(a.last, b.last), max(c.last, d.last)), r.x));
     for (var k = hi; k > r.x; k--) {
         let id = order[k - 1u];
         let reach = load_reach(id);
-        var live_a = uses(a, k, reach);
-        var live_b = uses(b, k, reach);
-        var s: Surfel;
-        var ea: Eval;
-        var eb: Eval;
-        if live_a || live_b {
+        // Non-short-circuit `|`: every pixel's test must run.
+        var any = reach_test(&a, k, reach) | reach_test(&b, k, reach) | reach_test(&c, k, reach) | reach_test(&d, k, reach);
+        var s = Surfel();
+        if any {
             s = load_surfel(id);
-            if live_a {
-                ea = eval_surfel(s, a.at.x, a.at.y, view);
-                live_a = ea.alpha >= MIN_ALPHA;
-            }
-            if live_b {
-                eb = eval_surfel(s, b.at.x, b.at.y, view);
-                live_b = eb.alpha >= MIN_ALPHA;
-            }
+            any = evaluate(&a, s) | evaluate(&b, s) | evaluate(&c, s) | evaluate(&d, s);
         }
-        if !lanes_any(live_a || live_b) {
+        if !lanes_any(any) {
             continue;
         }
         // Lanes whose pixels do not use this surfel add zeros and keep their state.
         let g0 = stride * id;
         let si = cand[id];
-        var c = vec3<f32>(0.0);
-        if live_a || live_b {
-            c = vec3<f32>(rgb[3u * si], rgb[3u * si + 1u], rgb[3u * si + 2u]);
+        var col = vec3<f32>(0.0);
+        if any {
+            col = vec3<f32>(rgb[3u * si], rgb[3u * si + 1u], rgb[3u * si + 2u]);
         }
-        if live_a {
-            colour(&a, ea.alpha, c);
-        }
-        if live_b {
-            colour(&b, eb.alpha, c);
-        }
-        var dot_a = 0.0;
-        var dot_b = 0.0;
+        colour(&a, col);
+        colour(&b, col);
+        colour(&c, col);
+        colour(&d, col);
         for (var q = 0u; q < ch; q++) {
             var g_l = 0.0;
-            if live_a || live_b {
+            if any {
                 let l = logits[si * ch + q];
-                if live_a {
-                    let dl = g_logits[a.pix * ch + q];
-                    dot_a += l * dl;
-                    g_l += a.w * dl;
-                }
-                if live_b {
-                    let dl = g_logits[b.pix * ch + q];
-                    dot_b += l * dl;
-                    g_l += b.w * dl;
-                }
+                g_l = logit(&a, q, l) + logit(&b, q, l) + logit(&c, q, l) + logit(&d, q, l);
             }
             lanes_add(g0 + S_LOGITS + q, g_l);
         }
-        // Explicitly zero: Chromium (Tint on SwiftShader) kept the previous iteration's
-        // value of a `var g: Share;` declared in this loop, which WGSL zeroes.
-        var g = Share();
-        if live_a {
-            g = geometry(&a, s, ea, dot_a);
-        }
-        if live_b {
-            g = plus(g, geometry(&b, s, eb, dot_b));
-        }
+        let g = plus(plus(geometry(&a, s), geometry(&b, s)), plus(geometry(&c, s), geometry(&d, s)));
         add3(g0 + S_RGB, g.rgb);
         lanes_add(g0 + S_OPACITY, g.op);
         lanes_add(g0 + S_SU, g.su);
@@ -275,7 +283,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
     // The exposure gradient: one add per workgroup instead of one per pixel.
     red[li] = dexp;
     workgroupBarrier();
-    for (var off = 16u; off > 0u; off = off / 2u) {
+    for (var off = 8u; off > 0u; off = off / 2u) {
         if li < off {
             red[li] += red[li + off];
         }

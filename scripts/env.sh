@@ -10,3 +10,6 @@ if [ -z "${XDG_RUNTIME_DIR:-}" ] || [ ! -d "${XDG_RUNTIME_DIR}" ]; then
   mkdir -p "$XDG_RUNTIME_DIR" && chmod 0700 "$XDG_RUNTIME_DIR"
 fi
 export PATH="$HOME/.cargo/bin:$PATH"
+# wasm-bindgen-test-runner gives the whole headless run 20 s by default; the GPU tests
+# in Chromium (SwiftShader, debug wasm) take about that, so a busy machine timed out.
+export WASM_BINDGEN_TEST_TIMEOUT="${WASM_BINDGEN_TEST_TIMEOUT:-300}"

@@ -1,5 +1,5 @@
 //! lanes (single): the same interface as lanes_subgroup.wgsl for adapters without
-//! subgroups: every pixel walks its own list and adds its own non-zero values.
+//! subgroups: every invocation walks its own list and adds its own non-zero values.
 
 fn lanes_init(li: u32) {}
 

@@ -2,9 +2,9 @@
 //! per value by the subgroup's first lane. `rasterize_backward` walks its tile's list
 //! in lockstep within a subgroup (the loop bound is `lanes_max` of the pixels' own
 //! bounds, and it skips a surfel only when `lanes_any` says no lane uses it), so every
-//! lane reaches every `lanes_add` with the same address, adding zero when its pixel
-//! does not use the surfel. Neighbouring pixels share most surfels: on lavapipe
-//! (8 lanes) this turns up to 8 atomics into one. The uniformity diagnostic is off
+//! lane reaches every `lanes_add` with the same address, adding zero when none of its
+//! pixels uses the surfel. Neighbouring pixels share most surfels: on lavapipe
+//! (8 lanes of four pixels each) this turns up to 32 pixels' adds into one atomic. The uniformity diagnostic is off
 //! because the analysis is workgroup-wide and cannot see that these branches are
 //! uniform within the subgroup, which is all that the subgroup built-ins need.
 

@@ -94,3 +94,54 @@ fn gpu_forward_matches_the_oracle_across_scan_blocks() {
     assert_eq!(d.pairs.0 as usize, d.pairs.1, "pair counts differ");
     assert!(d.forward < 1e-4, "forward max abs error {}", d.forward);
 }
+
+/// The BEV lists per chunk only the surfels that can reach it (so that a large model
+/// needs no per-view buffer of its own size); the image must be the one every surfel
+/// listed for every chunk gives.
+#[test]
+fn bev_chunks_listing_their_own_surfels_render_the_same_map() {
+    use rogs::bev::{render_listing, BevGeometry, CHUNK};
+    use rogs::render::gpu::GpuRasterizer;
+    let c = ctx();
+    // 40 m × 30 m at 0.25 m: 3 × 3 chunks of 256 px at 5 cm, surfels on every border.
+    let p = rogs::render::scene::road_patch(160, 120, 0.25, -20.0, -15.0, 3, 7).cast::<f32>();
+    let g = BevGeometry::around(p.pos.iter().map(|q| [q[0] as f64, q[1] as f64]), 0.05, 0.5);
+    assert!(
+        g.width > 2 * CHUNK && g.height > 2 * CHUNK,
+        "{} × {}",
+        g.width,
+        g.height
+    );
+    let raster = pollster::block_on(GpuRasterizer::new(&c)).expect("rasteriser");
+    let gp = GpuRasterizer::upload(&c, &p);
+    let bev = |per_chunk| {
+        pollster::block_on(render_listing(
+            &c,
+            &raster,
+            &gp,
+            &p,
+            &g,
+            [0.0; 3],
+            &mut |_, _| {},
+            per_chunk,
+        ))
+        .expect("bev")
+    };
+    let (listed, all) = (bev(true), bev(false));
+    let covered = all.alpha.iter().filter(|&&a| a > 0.5).count();
+    assert!(
+        covered > all.alpha.len() / 2,
+        "the map covers {covered} pixels"
+    );
+    let diff = |a: &[f32], b: &[f32]| {
+        a.iter()
+            .zip(b)
+            .filter(|(x, y)| !(x.is_nan() && y.is_nan()))
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0f32, f32::max)
+    };
+    assert!(diff(&listed.alpha, &all.alpha) < 1e-5);
+    assert!(diff(&listed.rgb, &all.rgb) < 1e-5);
+    assert!(diff(&listed.logits, &all.logits) < 1e-5);
+    assert!(diff(&listed.elevation, &all.elevation) < 1e-4);
+}

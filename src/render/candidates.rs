@@ -16,19 +16,23 @@ use super::{CullConfig, ViewCamera};
 pub const Z_MARGIN: f32 = 2.0;
 
 /// Indices of the surfels whose camera-space position, for any z within `Z_MARGIN` of
-/// `xyz`'s, can fall inside the culling box (near ≤ depth ≤ far, |x| ≤ half width).
+/// `xyz`'s, can fall inside the culling box (near ≤ depth ≤ far, |x| ≤ half width,
+/// |y| ≤ half height).
 pub fn candidates(xyz: &[[f32; 3]], cam: &ViewCamera, cull: &CullConfig) -> Vec<u32> {
-    let [r0, _, r2] = cam.world_to_cam;
+    let [r0, r1, r2] = cam.world_to_cam;
     // A margin in z moves camera-space x and depth by at most |r·ẑ| · Z_MARGIN; a
     // centimetre more covers the GPU's rounding.
     let spread = |r: [f32; 4]| r[2].abs() * Z_MARGIN + 0.01;
-    let (sx, sz) = (spread(r0), spread(r2));
+    let (sx, sy, sz) = (spread(r0), spread(r1), spread(r2));
     let row = |r: [f32; 4], p: [f32; 3]| r[0] * p[0] + r[1] * p[1] + r[2] * p[2] + r[3];
     xyz.iter()
         .enumerate()
         .filter(|(_, &p)| {
             let (x, depth) = (row(r0, p), row(r2, p));
-            depth + sz >= cull.near && depth - sz <= cull.far && x.abs() - sx <= cull.half_width
+            depth + sz >= cull.near
+                && depth - sz <= cull.far
+                && x.abs() - sx <= cull.half_width
+                && (cull.half_height.is_infinite() || row(r1, p).abs() - sy <= cull.half_height)
         })
         .map(|(i, _)| i as u32)
         .collect()
@@ -65,6 +69,7 @@ mod tests {
             near: 1.0,
             far: 12.0,
             half_width: 3.0,
+            ..CullConfig::default()
         };
         // A 12 m × 30 m patch: some surfels behind, beside and beyond the box.
         let p = road_patch(60, 150, 0.2, -6.0, -5.0, 1, 3);

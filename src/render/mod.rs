@@ -45,6 +45,10 @@ pub struct CullConfig {
     pub far: f32,
     /// Half the box width across the camera's view, metres.
     pub half_width: f32,
+    /// Half the box height (camera y), metres; applied to the host's candidate list
+    /// only (`candidates`), not by `project`. Infinite for the driving views; the BEV
+    /// chunks use it so that a chunk lists only the surfels that can reach it.
+    pub half_height: f32,
 }
 
 impl Default for CullConfig {
@@ -53,6 +57,7 @@ impl Default for CullConfig {
             near: 1.0,
             far: 20.0,
             half_width: 20.0,
+            half_height: f32::INFINITY,
         }
     }
 }

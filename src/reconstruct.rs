@@ -276,7 +276,17 @@ impl Session {
         progress: &mut dyn FnMut(usize, usize),
     ) -> Result<BevImage, GpuError> {
         let t = &self.trainer;
-        bev::render(&t.ctx, &t.raster, &t.params, p, g, self.origin, progress).await
+        bev::render(
+            &t.ctx,
+            &t.raster,
+            &t.params,
+            p,
+            g,
+            self.origin,
+            progress,
+            true,
+        )
+        .await
     }
 
     /// Renders per-surfel scalars (q and refinement level) as a two-channel BEV image
@@ -292,7 +302,17 @@ impl Session {
         }
         let t = &self.trainer;
         let gp = GpuRasterizer::upload(&t.ctx, &s);
-        bev::render(&t.ctx, &t.raster, &gp, &s, g, self.origin, &mut |_, _| {}).await
+        bev::render(
+            &t.ctx,
+            &t.raster,
+            &gp,
+            &s,
+            g,
+            self.origin,
+            &mut |_, _| {},
+            true,
+        )
+        .await
     }
 
     /// Centres of the surfels some training view saw, in world coordinates.

@@ -100,7 +100,7 @@ fn gpu_forward_matches_the_oracle_across_scan_blocks() {
 /// listed for every chunk gives.
 #[test]
 fn bev_chunks_listing_their_own_surfels_render_the_same_map() {
-    use rogs::bev::{render_listing, BevGeometry, CHUNK};
+    use rogs::bev::{render, BevGeometry, CHUNK};
     use rogs::render::gpu::GpuRasterizer;
     let c = ctx();
     // 40 m × 30 m at 0.25 m: 3 × 3 chunks of 256 px at 5 cm, surfels on every border.
@@ -115,7 +115,7 @@ fn bev_chunks_listing_their_own_surfels_render_the_same_map() {
     let raster = pollster::block_on(GpuRasterizer::new(&c)).expect("rasteriser");
     let gp = GpuRasterizer::upload(&c, &p);
     let bev = |per_chunk| {
-        pollster::block_on(render_listing(
+        pollster::block_on(render(
             &c,
             &raster,
             &gp,

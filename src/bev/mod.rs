@@ -100,23 +100,11 @@ fn chunk_camera(g: &BevGeometry, origin: [f64; 3], c0: u32, r0: u32, z_mean: f64
 
 /// Renders the BEV of the GPU model `gp` (whose host copy `p` gives the surfel
 /// positions, local frame) over geometry `g`, chunk by chunk. `progress(done, total)`
-/// is called after each chunk.
-pub async fn render(
-    ctx: &GpuContext,
-    raster: &GpuRasterizer,
-    gp: &GpuParams,
-    p: &Params<f32>,
-    g: &BevGeometry,
-    origin: [f64; 3],
-    progress: &mut dyn FnMut(usize, usize),
-) -> Result<BevImage, GpuError> {
-    render_listing(ctx, raster, gp, p, g, origin, progress, true).await
-}
-
-/// `render`, with `per_chunk` false listing every surfel for every chunk (what
-/// `render` did before; tests compare the two).
+/// is called after each chunk. With `per_chunk` (what the product uses), each chunk
+/// lists only the surfels that can reach it; without, every surfel for every chunk
+/// (tests compare the two).
 #[allow(clippy::too_many_arguments)]
-pub async fn render_listing(
+pub async fn render(
     ctx: &GpuContext,
     raster: &GpuRasterizer,
     gp: &GpuParams,

@@ -400,14 +400,20 @@ pub struct Outcome {
 }
 
 impl Session {
-    /// Reads the model back, renders the BEV layers and scores them.
+    /// The model as it stands (after the last good step), read back from the GPU.
+    /// Callers save it before `finish` so that a later failure cannot lose training.
+    pub async fn model(&self) -> Result<Params<f32>, ReconstructError> {
+        Ok(read_params(&self.trainer.ctx, &self.trainer.params).await?)
+    }
+
+    /// Renders the BEV layers of the model `p` (from `model`) and scores them.
     pub async fn finish(
         &mut self,
         b: &Bundle,
+        p: Params<f32>,
         progress: &mut dyn FnMut(usize, usize),
     ) -> Result<Outcome, ReconstructError> {
         let t = Instant::now();
-        let p = read_params(&self.trainer.ctx, &self.trainer.params).await?;
         let truth = BevRaster::from_bundle(b)?;
         let g = self.geometry(truth.as_ref());
         let bev = self.render_bev(&p, &g, progress).await?;

@@ -96,12 +96,14 @@ impl Reconstruction {
     /// Renders the layers, scores them and prepares the export files; resolves to the
     /// report (as JSON text).
     pub async fn finish(&mut self) -> Result<String, JsValue> {
+        let p = self.session.model().await.map_err(err)?;
+        let mut files = crate::export::model_files(&p, self.session.origin);
         let o = self
             .session
-            .finish(&self.bundle, &mut |_, _| {})
+            .finish(&self.bundle, p, &mut |_, _| {})
             .await
             .map_err(err)?;
-        let mut files = crate::export::files(&o, &self.bundle.manifest, self.session.origin);
+        files.extend(crate::export::files(&o, &self.bundle.manifest));
         let r = report(&self.session, &o, &self.bundle.manifest.name);
         let text = serde_json::to_string_pretty(&r).map_err(err)?;
         files.push(("report.json".into(), text.clone().into_bytes()));

@@ -27,7 +27,8 @@ fn demo_bundle() -> Bundle {
 fn run(b: &Bundle, cfg: ReconstructConfig) -> (Session, rogs::reconstruct::Outcome) {
     let mut s = pollster::block_on(Session::new(b, cfg, ctx())).expect("session");
     while pollster::block_on(s.step(b)).expect("step").is_some() {}
-    let o = pollster::block_on(s.finish(b, &mut |_, _| {})).expect("finish");
+    let p = pollster::block_on(s.model()).expect("model");
+    let o = pollster::block_on(s.finish(b, p, &mut |_, _| {})).expect("finish");
     (s, o)
 }
 
@@ -59,7 +60,8 @@ fn demo_reconstruction_beats_the_ipm_baseline_and_meets_measured_floors() {
     );
     assert!(h.psnr_db > h.ipm_psnr_db, "held-out PSNR {h:?}");
     // Every export decodes with the map's size.
-    let files = rogs::export::files(&o, &b.manifest, s.origin);
+    let mut files = rogs::export::files(&o, &b.manifest);
+    files.extend(rogs::export::model_files(&o.params, s.origin));
     let png = files.iter().find(|f| f.0 == "rgb.png").expect("rgb.png");
     let img = image::load_from_memory(&png.1).expect("png");
     assert_eq!(

@@ -144,20 +144,25 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
         }
     }
     bar.finish();
+    // The model is written before the BEV: a failure there must not lose the training.
+    let p = pollster::block_on(s.model()).map_err(|e| e.to_string())?;
+    let model = crate::export::model_files(&p, s.origin);
+    write_files(&a.out, &model)?;
     let mut bar = Progress::new("BEV");
-    let o = pollster::block_on(s.finish(&b, &mut |d, t| bar.update(d, t)))
-        .map_err(|e| e.to_string())?;
+    let o = pollster::block_on(s.finish(&b, p, &mut |d, t| bar.update(d, t))).map_err(|e| {
+        format!(
+            "{e} (the trained model was written to {})",
+            a.out.join("surfels.ply").display()
+        )
+    })?;
     bar.finish();
-    let mut files = crate::export::files(&o, &b.manifest, s.origin);
+    let mut files = crate::export::files(&o, &b.manifest);
     let report = crate::reconstruct::report(&s, &o, &a.bundle.display().to_string());
     files.push((
         "report.json".into(),
         serde_json::to_vec_pretty(&report).map_err(|e| e.to_string())?,
     ));
-    for (name, bytes) in &files {
-        let p = a.out.join(name);
-        std::fs::write(&p, bytes).map_err(|e| format!("cannot write {}: {e}", p.display()))?;
-    }
+    write_files(&a.out, &files)?;
     if let Some(m) = &o.metrics {
         eprintln!("metrics: {}", serde_json::to_string(m).unwrap_or_default());
     }
@@ -167,10 +172,22 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
             h.psnr_db, h.ipm_psnr_db, h.frames
         );
     }
-    eprintln!("wrote {} files to {}", files.len(), a.out.display());
+    eprintln!(
+        "wrote {} files to {}",
+        model.len() + files.len(),
+        a.out.display()
+    );
     Ok(if stopped.is_some() {
         ExitCode::FAILURE
     } else {
         ExitCode::SUCCESS
     })
+}
+
+fn write_files(dir: &std::path::Path, files: &[(String, Vec<u8>)]) -> Result<(), String> {
+    for (name, bytes) in files {
+        let p = dir.join(name);
+        std::fs::write(&p, bytes).map_err(|e| format!("cannot write {}: {e}", p.display()))?;
+    }
+    Ok(())
 }

@@ -7,6 +7,7 @@ pub mod ply;
 use crate::bev::BevGeometry;
 use crate::bundle::Manifest;
 use crate::reconstruct::Outcome;
+use crate::render::Params;
 use colour::mapped_with_legend;
 use image::{GrayImage, RgbImage};
 
@@ -109,8 +110,24 @@ pub fn elevation_error(o: &Outcome) -> Option<Vec<f32>> {
     )
 }
 
-/// Every output file of a run except the report.
-pub fn files(o: &Outcome, m: &Manifest, origin: [f64; 3]) -> Vec<(String, Vec<u8>)> {
+/// The model's own files (surfels.ply and surfel_centres.f32), which need no BEV: the
+/// CLI writes them as soon as training ends.
+pub fn model_files(p: &Params<f32>, origin: [f64; 3]) -> Vec<(String, Vec<u8>)> {
+    let centres: Vec<u8> = p
+        .pos
+        .iter()
+        .flat_map(|p| [0, 1, 2].map(|k| ((p[k] as f64 + origin[k]) as f32).to_le_bytes()))
+        .flatten()
+        .collect();
+    vec![
+        ("surfel_centres.f32".into(), centres),
+        ("surfels.ply".into(), ply::surfels_ply(p, origin)),
+    ]
+}
+
+/// The map's files (BEV layers and their geometry); with `model_files` and the report,
+/// every output of a run.
+pub fn files(o: &Outcome, m: &Manifest) -> Vec<(String, Vec<u8>)> {
     let g: &BevGeometry = &o.geometry;
     let (w, h) = (g.width, g.height);
     let r = &o.raster;
@@ -155,15 +172,6 @@ pub fn files(o: &Outcome, m: &Manifest, origin: [f64; 3]) -> Vec<(String, Vec<u8
             png(&mapped_with_legend(&e, w, h, 0.0, 0.1, &|v| format!("{:.0}cm", v * 100.0)).into()),
         ));
     }
-    let centres: Vec<u8> = o
-        .params
-        .pos
-        .iter()
-        .flat_map(|p| [0, 1, 2].map(|k| ((p[k] as f64 + origin[k]) as f32).to_le_bytes()))
-        .flatten()
-        .collect();
-    out.push(("surfel_centres.f32".into(), centres));
-    out.push(("surfels.ply".into(), ply::surfels_ply(&o.params, origin)));
     out
 }
 

@@ -12,15 +12,17 @@
 //!
 //! Moments: x and y stay fixed on the grid, so they have none; m and v are held for
 //! the L = 11 + channels learnable slots (z, rotation 4, log-scales 2, opacity, rgb 3,
-//! logits), learnable slot k being gradient slot k + 2. They are stored slot-major (m
-//! of slot k for surfel i at 2k·row + i, v at (2k + 1)·row + i; `row` is the surfel
-//! count rounded up for binding alignment) so that neighbouring invocations read
-//! neighbouring words: on a CPU rasteriser such as lavapipe, whose SIMD lanes are
+//! logits), learnable slot k being gradient slot k + 2. They are stored in blocks of
+//! 256 surfels (one workgroup), slot-major within a block: m of slot k for surfel i at
+//! ((i / 256)·2L + 2k)·256 + i % 256, v 256 words later. Neighbouring invocations so
+//! read neighbouring words: on a CPU rasteriser such as lavapipe, whose SIMD lanes are
 //! neighbouring invocations, that is one vector load instead of a gather.
-//! Slot-major also lets the moments exceed one storage binding (lavapipe binds
-//! 128 MiB; a 5 cm `nuscenes-like` model needs 285 MB): the host dispatches `main`
-//! once per window of slots [slot0, slot1), binding only that window's moments, so
-//! `moments[0]` is m of slot0. Browsers bind 1 GiB, one window.
+//! A block holds all of its surfels' moments, so the moments can exceed one storage
+//! binding (lavapipe binds 128 MiB; a 5 cm `nuscenes-like` model needs 277 MB) at no
+//! cost: the host dispatches `main` once per window of whole blocks, binding only that
+//! window's moments, and every surfel is visited once. (Windows of slots, the layout
+//! before, visited every surfel once per window: three passes took 2.2× one pass.)
+//! Browsers bind 1 GiB, one window.
 //!
 //! The exposure (a, b) per camera is followed in its buffer by its moments (m_a, v_a,
 //! m_b, v_b per camera); its gradient follows the last candidate's slot.
@@ -52,17 +54,19 @@ struct AdamParams {
     exposure_at: u32,
     channels: u32,
     cameras: u32,
-    // Moments per slot and kind (m or v): the surfel count rounded up.
-    moment_row: u32,
-    slot0: u32,
-    slot1: u32,
-    pad0: u32,
+    // The first surfel of this pass (a multiple of 256: its window starts a block).
+    first: u32,
+    // L, the learnable slots per surfel.
+    learnable: u32,
+    // One past the last surfel of this pass.
+    end: u32,
     pad1: u32,
+    pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> ap: AdamParams;
 @group(0) @binding(1) var<storage, read> grads: array<f32>;
-// The moments of slots [slot0, slot1).
+// The moments of this pass's blocks (from surfel `first`).
 @group(0) @binding(2) var<storage, read_write> moments: array<f32>;
 @group(0) @binding(3) var<storage, read_write> pos: array<f32>;
 @group(0) @binding(4) var<storage, read_write> rotation: array<f32>;
@@ -98,21 +102,16 @@ fn adam(value: f32, g: f32, m0: f32, v0: f32, lr: f32) -> vec3<f32> {
 
 /// Learnable slot k of surfel i: its new value from `value`, storing the moments.
 fn step_slot(i: u32, k: u32, value: f32, g: f32, lr: f32) -> f32 {
-    let mi = 2u * (k - ap.slot0) * ap.moment_row + i;
-    let r = adam(value, g, moments[mi], moments[mi + ap.moment_row], lr);
+    let mi = (((i - ap.first) / 256u) * 2u * ap.learnable + 2u * k) * 256u + i % 256u;
+    let r = adam(value, g, moments[mi], moments[mi + 256u], lr);
     moments[mi] = r.y;
-    moments[mi + ap.moment_row] = r.z;
+    moments[mi + 256u] = r.z;
     return r.x;
 }
 
-/// Whether learnable slot k is in this pass's window (the same for every invocation).
-fn live(k: u32) -> bool {
-    return k >= ap.slot0 && k < ap.slot1;
-}
-
-/// Surfel i's update of the learnable slots in this window. Written out group by
-/// group rather than as one loop over slots with a branch per group: on lavapipe the
-/// loop took three times as long (270 vs 85 ms per step on `nuscenes-like` at 10 cm).
+/// Surfel i's update of every learnable slot. Written out group by group rather than
+/// as one loop over slots with a branch per group: on lavapipe the loop took three
+/// times as long (270 vs 85 ms per step on `nuscenes-like` at 10 cm).
 fn update_surfel(i: u32) {
     let ch = ap.channels;
     let n = ap.count;
@@ -121,31 +120,19 @@ fn update_surfel(i: u32) {
     let bit = 1u << (i % 32u);
     seen = (mask & bit) != 0u;
     gs = ap.grad_stride * (before + countOneBits(mask & (bit - 1u))) + 2u;
-    if live(0u) {
-        pos[3u * i + 2u] = step_slot(i, 0u, pos[3u * i + 2u], zreg[i] + grad(0u), ap.lr_z);
-    }
+    pos[3u * i + 2u] = step_slot(i, 0u, pos[3u * i + 2u], zreg[i] + grad(0u), ap.lr_z);
     for (var k = 0u; k < 4u; k++) {
-        if live(1u + k) {
-            rotation[4u * i + k] = step_slot(i, 1u + k, rotation[4u * i + k], grad(1u + k), ap.lr_rotation);
-        }
+        rotation[4u * i + k] = step_slot(i, 1u + k, rotation[4u * i + k], grad(1u + k), ap.lr_rotation);
     }
     for (var k = 0u; k < 2u; k++) {
-        if live(5u + k) {
-            log_scale[2u * i + k] = step_slot(i, 5u + k, log_scale[2u * i + k], grad(5u + k), ap.lr_scale);
-        }
+        log_scale[2u * i + k] = step_slot(i, 5u + k, log_scale[2u * i + k], grad(5u + k), ap.lr_scale);
     }
-    if live(7u) {
-        opacity[i] = step_slot(i, 7u, opacity[i], grad(7u), ap.lr_opacity);
-    }
+    opacity[i] = step_slot(i, 7u, opacity[i], grad(7u), ap.lr_opacity);
     for (var k = 0u; k < 3u; k++) {
-        if live(8u + k) {
-            rgb[3u * i + k] = clamp(step_slot(i, 8u + k, rgb[3u * i + k], grad(8u + k), ap.lr_rgb), 0.0, 1.0);
-        }
+        rgb[3u * i + k] = clamp(step_slot(i, 8u + k, rgb[3u * i + k], grad(8u + k), ap.lr_rgb), 0.0, 1.0);
     }
     for (var q = 0u; q < ch; q++) {
-        if live(11u + q) {
-            logits[ch * i + q] = step_slot(i, 11u + q, logits[ch * i + q], grad(11u + q), ap.lr_logits);
-        }
+        logits[ch * i + q] = step_slot(i, 11u + q, logits[ch * i + q], grad(11u + q), ap.lr_logits);
     }
 }
 
@@ -162,8 +149,8 @@ fn update_exposure() {
 
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let i = gid.x + gid.y * ap.row;
-    if i >= ap.count || status[0] != 0u {
+    let i = ap.first + gid.x + gid.y * ap.row;
+    if i >= ap.end || status[0] != 0u {
         return;
     }
     update_surfel(i);

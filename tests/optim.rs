@@ -7,8 +7,8 @@ use rogs::gpu::GpuContext;
 use rogs::loss::regularise::{regularise, RegWeights};
 use rogs::optim::check::compare_step;
 
-/// With every moment in one binding, and in windows of 3 slots (5 `adam` passes, as a
-/// model larger than one binding takes); step 2 sized from step 1's pair count, and
+/// With every moment in one binding, and in windows of 3 blocks of 256 surfels (3
+/// `adam` passes, the last one partial, as a model larger than one binding takes); step 2 sized from step 1's pair count, and
 /// with too small a margin, so that its pairs overflow and it runs again.
 #[test]
 fn gpu_step_matches_the_oracles() {

@@ -100,7 +100,7 @@ async fn optimisation_step_matches_the_oracles_in_the_browser() {
         Ok(c) => c,
         Err(e) => panic!("WebGPU adapter required: {e}"),
     };
-    // In 5 windows of moments: the model is small, so one would do, but a large one
+    // In 3 windows of moments (blocks of 256 surfels, the last partial): the model is small, so one would do, but a large one
     // takes this path; the page's full runs take the single-window one. Step 2's pair
     // buffers are too small, so it overflows them once and runs again.
     let d = rogs::optim::check::compare_step(ctx, Some(3), Some(0.4))

@@ -52,6 +52,10 @@ pub enum Bench {
         /// over the subgroup first (to measure what the reduction gains).
         #[arg(long)]
         no_subgroup_reduction: bool,
+        /// At most this many blocks of 256 surfels per Adam pass (the passes a model
+        /// whose moments exceed one storage binding needs; to measure what they cost).
+        #[arg(long)]
+        moment_window: Option<usize>,
     },
     /// Grid, initialisation and refinement of a bundle: time per stage, surfel
     /// counts and bytes per surfel (median of the runs).
@@ -94,12 +98,14 @@ pub fn run(b: Bench) -> Result<ExitCode, String> {
             resolution,
             half_width,
             no_subgroup_reduction,
+            moment_window,
         } => super::bench_step::run(
             &bundle,
             steps,
             resolution,
             half_width,
             no_subgroup_reduction,
+            moment_window,
         ),
         Bench::Init {
             bundle,

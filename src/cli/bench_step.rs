@@ -19,11 +19,13 @@ pub fn run(
     resolution: f64,
     half_width: f64,
     no_subgroup_reduction: bool,
+    moment_window: Option<usize>,
 ) -> Result<ExitCode, String> {
     let b = Bundle::open(bundle, Limits::default(), &mut |_, _| {}).map_err(|e| e.to_string())?;
     let mut cfg = ReconstructConfig::default();
     cfg.prepare.grid.resolution = resolution;
     cfg.prepare.grid.half_width = half_width;
+    cfg.train.moment_window = moment_window;
     // One warm-up step (first use of every pipeline and buffer size), then the timed ones.
     cfg.train.max_steps = Some(steps.max(1) + 1);
     let mut ctx = GpuContext::new_blocking().map_err(|e| e.to_string())?;

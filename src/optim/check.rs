@@ -85,8 +85,8 @@ fn reg_data(n: usize, z: &[f32], rng: &mut Rng) -> RegData {
     }
 }
 
-/// Two GPU steps against the oracles; `moment_window` limits the learnable slots
-/// whose moments one `adam` pass binds (`None`: as many as fit, one pass here);
+/// Two GPU steps against the oracles; `moment_window` limits the blocks of 256
+/// surfels whose moments one `adam` pass binds (`None`: as many as fit, one pass here);
 /// `pair_margin` (`None`: the default) sizes step 2's pair buffers from step 1's
 /// count (below 1 step 2 overflows them and runs again).
 pub async fn compare_step(

@@ -81,10 +81,11 @@ pub struct Trainer {
     pub raster: GpuRasterizer,
     k: Kernels,
     pub params: GpuParams,
-    /// Adam moments, slot-major: m and v of learnable slot k at (2k, 2k + 1)·row.
+    /// Adam moments in blocks of `MOMENT_BLOCK` surfels, slot-major within a block
+    /// (shaders/adam.wgsl).
     moments: wgpu::Buffer,
-    moment_row: u32,
-    /// Slot ranges whose moments fit one storage binding: one `adam` pass each.
+    /// Surfel ranges [first, end), whole blocks, whose moments fit one storage
+    /// binding: one `adam` pass each.
     windows: Vec<(u32, u32)>,
     /// The regularisers' z gradient per surfel, then the view's membership words.
     zreg: wgpu::Buffer,
@@ -125,9 +126,9 @@ enum Try {
 }
 
 /// The per-surfel buffers are bound whole, except the Adam moments, which are bound
-/// one window of slots at a time; so the largest of them (the logits, 4·channels bytes
-/// per surfel, the rotations, 16, or one slot's m and v, 8) must fit the adapter's
-/// storage binding, and the moments its largest buffer. The per-view buffers hold only
+/// one window of blocks of surfels at a time; so the largest of them (the logits,
+/// 4·channels bytes per surfel, or the rotations, 16) must fit the adapter's storage
+/// binding, and the moments its largest buffer. The per-view buffers hold only
 /// the view's candidates (checked per view). A model that does not fit is refused
 /// with what to change.
 pub fn check_fits(ctx: &GpuContext, surfels: usize, channels: usize) -> Result<(), GpuError> {
@@ -143,7 +144,7 @@ pub fn check_fits(ctx: &GpuContext, surfels: usize, channels: usize) -> Result<(
             limit / per
         )));
     }
-    let moments = 8 * learnable(channels) as u64 * surfels as u64;
+    let moments = moment_bytes(surfels as u32, learnable(channels) as u32);
     if moments > ctx.limits.max_buffer_size {
         return Err(GpuError::Validation(format!(
             "{surfels} surfels need {} MiB of Adam moments in one GPU buffer, but this adapter allows at most {} MiB per buffer: {advice}",
@@ -154,23 +155,28 @@ pub fn check_fits(ctx: &GpuContext, surfels: usize, channels: usize) -> Result<(
     Ok(())
 }
 
-/// The moments' row (surfels rounded up so that every window starts at an allowed
-/// binding offset) and the slot windows [k0, k1) whose moments fit one binding, at
-/// most `cap` slots each.
-fn moment_windows(
-    ctx: &GpuContext,
-    n: u32,
-    slots: u32,
-    cap: Option<usize>,
-) -> (u32, Vec<(u32, u32)>) {
-    let align = (ctx.limits.min_storage_buffer_offset_alignment / 4).max(1);
-    let row = n.max(1).next_multiple_of(align);
-    let fit = (ctx.limits.max_storage_buffer_binding_size / (8 * row as u64)).max(1) as u32;
-    let per = fit.min(cap.map_or(u32::MAX, |c| c.max(1) as u32));
-    let windows = (0..slots.div_ceil(per))
-        .map(|w| (w * per, ((w + 1) * per).min(slots)))
-        .collect();
-    (row, windows)
+/// Surfels per block of Adam moments: the `adam` workgroup (shaders/adam.wgsl).
+const MOMENT_BLOCK: u32 = 256;
+
+/// Bytes of one block's moments: m and v of every learnable slot for 256 surfels
+/// (a multiple of 256, so every block starts at an allowed binding offset).
+fn block_bytes(slots: u32) -> u64 {
+    8 * slots as u64 * MOMENT_BLOCK as u64
+}
+
+/// Bytes of the moments of `n` surfels (whole blocks).
+fn moment_bytes(n: u32, slots: u32) -> u64 {
+    n.max(1).div_ceil(MOMENT_BLOCK) as u64 * block_bytes(slots)
+}
+
+/// The surfel windows [first, end), whole blocks, whose moments fit one binding, at
+/// most `cap` blocks each.
+fn moment_windows(ctx: &GpuContext, n: u32, slots: u32, cap: Option<usize>) -> Vec<(u32, u32)> {
+    let fit = (ctx.limits.max_storage_buffer_binding_size / block_bytes(slots)).max(1) as u32;
+    let per = MOMENT_BLOCK * fit.min(cap.map_or(u32::MAX, |c| c.max(1) as u32));
+    (0..n.max(1).div_ceil(per))
+        .map(|w| (w * per, ((w + 1) * per).min(n)))
+        .collect()
 }
 
 /// A (x, y) dispatch over `n` invocations in workgroups of 256, and its row stride.
@@ -217,11 +223,10 @@ impl Trainer {
         };
         let n = p.len() as u64;
         let slots = learnable(p.channels) as u32;
-        let (moment_row, windows) = moment_windows(&ctx, n as u32, slots, cfg.moment_window);
+        let windows = moment_windows(&ctx, n as u32, slots, cfg.moment_window);
         let params = GpuRasterizer::upload(&ctx, p);
         let me = Self {
-            moments: storage(&ctx, "moments", 8 * slots as u64 * moment_row as u64),
-            moment_row,
+            moments: storage(&ctx, "moments", moment_bytes(n as u32, slots)),
             windows,
             status: storage(&ctx, "status", 8),
             zreg: storage(&ctx, "zreg", 4 * (n + 2 * n.div_ceil(32))),
@@ -434,10 +439,11 @@ impl Trainer {
             lr.z_at(step, self.total_steps, self.extent),
             step as u32 + 1,
         );
-        let au = |slots: (u32, u32)| -> [u32; 24] {
+        let slots = learnable(ch as usize) as u32;
+        let au = |(first, end): (u32, u32), row: u32| -> [u32; 24] {
             [
                 n,
-                srow,
+                row,
                 stride,
                 camera as u32,
                 c.lr_z.to_bits(),
@@ -455,23 +461,23 @@ impl Trainer {
                 stride * f.cand.len() as u32,
                 ch,
                 self.cameras as u32,
-                self.moment_row,
-                slots.0,
-                slots.1,
+                first,
+                slots,
+                end,
                 0,
                 0,
             ]
         };
         let p = &self.params;
-        // One pass per window of slots whose moments fit one binding (usually one).
+        // One pass per window of blocks whose moments fit one binding (usually one).
         let k = &self.k.adam;
-        let bytes_per_slot = 8 * self.moment_row as u64;
-        for &(k0, k1) in &self.windows {
-            let u = uniform(ctx, "adam_params", bytes_of(&au((k0, k1))));
+        for &(first, end) in &self.windows {
+            let (wg, row) = grid_1d(ctx, end - first);
+            let u = uniform(ctx, "adam_params", bytes_of(&au((first, end), row)));
             let window = wgpu::BufferBinding {
                 buffer: &self.moments,
-                offset: k0 as u64 * bytes_per_slot,
-                size: std::num::NonZeroU64::new((k1 - k0) as u64 * bytes_per_slot),
+                offset: (first / MOMENT_BLOCK) as u64 * block_bytes(slots),
+                size: std::num::NonZeroU64::new(moment_bytes(end - first, slots)),
             };
             let bg = bind_ranges(
                 ctx,
@@ -490,11 +496,11 @@ impl Trainer {
                     (11, self.zreg.as_entire_buffer_binding()),
                 ],
             );
-            dispatch(&mut enc, k, &bg, sg);
+            dispatch(&mut enc, k, &bg, wg);
         }
         // Auto layouts hold only what an entry uses: the exposure's step needs no
         // surfel buffers.
-        let au = uniform(ctx, "adam_params", bytes_of(&au((0, 0))));
+        let au = uniform(ctx, "adam_params", bytes_of(&au((0, 0), 0)));
         let e = &self.k.exposure;
         let bg = bind(
             ctx,

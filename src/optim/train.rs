@@ -399,7 +399,8 @@ impl Trainer {
             &self.status,
         );
         let stride = VIEW_GRAD as u32 + ch;
-        let (sg, srow) = grid_1d(ctx, n);
+        // `regularise` handles 8 surfels per invocation (PER in its shader).
+        let (sg, srow) = grid_1d(ctx, n.div_ceil(8));
         let w = &self.reg;
         let rp: [u32; 8] = [
             n,

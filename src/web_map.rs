@@ -97,17 +97,18 @@ impl Reconstruction {
     /// report (as JSON text).
     pub async fn finish(&mut self) -> Result<String, JsValue> {
         let p = self.session.model().await.map_err(err)?;
-        let mut files = crate::export::model_files(&p, self.session.origin);
+        // Kept for export even if the BEV below fails.
+        self.files = crate::export::model_files(&p, self.session.origin);
         let o = self
             .session
             .finish(&self.bundle, p, &mut |_, _| {})
             .await
             .map_err(err)?;
-        files.extend(crate::export::files(&o, &self.bundle.manifest));
+        let mut files = crate::export::files(&o, &self.bundle.manifest);
         let r = report(&self.session, &o, &self.bundle.manifest.name);
         let text = serde_json::to_string_pretty(&r).map_err(err)?;
         files.push(("report.json".into(), text.clone().into_bytes()));
-        self.files = files;
+        self.files.extend(files);
         self.outcome = Some(o);
         Ok(text)
     }

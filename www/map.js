@@ -115,7 +115,9 @@ async function optimise(setStatus) {
     showMap(rec, report);
     if (!error) setStatus(`Map ready: ${rec.steps_done()} steps in ${fmtTime((performance.now() - t0) / 1000)}.`, 'ok');
   } catch (e) {
-    setStatus(`Could not render the map: ${e}`, 'error');
+    const kept = listExports(rec).childElementCount > 0;
+    if (kept) $('viewer').hidden = false;
+    setStatus(`Could not render the map: ${e}${kept ? '. The trained surfels can still be downloaded (Exports).' : ''}`, 'error');
   }
   $('run').disabled = false;
 }
@@ -158,6 +160,20 @@ function trajectoryLayer(t, w, h) {
   }
   g.stroke();
   return g.getImageData(0, 0, w, h).data;
+}
+
+// Download links for the run's files (after a failed BEV, the model's own files).
+function listExports(rec) {
+  const ex = $('exports');
+  ex.innerHTML = '';
+  for (const name of rec.file_names()) {
+    const a = document.createElement('a');
+    a.textContent = name;
+    a.download = name;
+    a.href = URL.createObjectURL(new Blob([rec.file(name)]));
+    ex.append(a, ' ');
+  }
+  return ex;
 }
 
 function resetViewer(rec) {
@@ -218,15 +234,7 @@ function showMap(rec, report) {
     try { px = rec.layer(name); } catch { continue; }
     setLayer(name, px, w, h);
   }
-  const ex = $('exports');
-  ex.innerHTML = '';
-  for (const name of rec.file_names()) {
-    const a = document.createElement('a');
-    a.textContent = name;
-    a.download = name;
-    a.href = URL.createObjectURL(new Blob([rec.file(name)]));
-    ex.append(a, ' ');
-  }
+  const ex = listExports(rec);
   // The layers as shown (visible ones, with their opacity) at map resolution.
   const shown = document.createElement('a');
   shown.textContent = 'map as shown.png';

@@ -84,7 +84,8 @@ enum Command {
     /// LiDAR when present. Writes to --out: rgb.png, semantic.png, semantic_ids.png,
     /// elevation.png (with legend), elevation.npy / elevation.f32 with bev.json
     /// (georeference), confidence.png, density.png, error.png (with truth),
-    /// surfels.ply and report.json. A NaN during optimisation stops it, keeps the
+    /// surfels.ply, surfel_centres.f32 (these two as soon as training ends, before the
+    /// BEV) and report.json. A NaN during optimisation stops it, keeps the
     /// last good model, still writes the outputs and exits non-zero.
     Reconstruct(reconstruct::Args),
 }

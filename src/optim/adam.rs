@@ -157,8 +157,8 @@ pub fn usable(x: f32) -> bool {
 
 /// One step of every surfel parameter in `p` from gradients `g` (same layout) and of
 /// the view's exposure; `moments` holds m, v interleaved per learnable slot
-/// (`2 learnable(channels)` per surfel; the kernel stores them slot-major, which
-/// changes no value). All or nothing: when any gradient is not
+/// (`2 learnable(channels)` per surfel; the kernel stores them in blocks of 256
+/// surfels, slot-major within a block, which changes no value). All or nothing: when any gradient is not
 /// `usable`, nothing changes and the result is false.
 pub fn step(
     p: &mut Params<f32>,

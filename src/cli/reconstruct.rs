@@ -65,6 +65,12 @@ pub struct Args {
     /// Final z learning rate as a ratio of the scene extent (default 1.6e-5; the paper: 1.6e-6).
     #[arg(long)]
     lr_z_end: Option<f32>,
+    /// LiDAR points farther than this (metres) from a surfel's trajectory-plane
+    /// height are taken for cars, poles or walls and ignored by the LiDAR elevation
+    /// loss (default 0.3). Raise it where the ground departs from the road's plane
+    /// (verges, embankments).
+    #[arg(long)]
+    lidar_gate: Option<f32>,
     /// Stop after this many steps (for timing part of an epoch on a large bundle;
     /// report.json then estimates seconds per epoch from the steps done).
     #[arg(long)]
@@ -93,6 +99,9 @@ fn config(a: &Args) -> ReconstructConfig {
         c.train.loss.traj = 0.0;
     }
     c.baseline_ipm = a.baseline.is_some();
+    if let Some(v) = a.lidar_gate {
+        c.train.loss.lidar_gate_m = v;
+    }
     if let Some(v) = a.lr_z_start {
         c.train.lr.z_start = v;
     }

@@ -58,3 +58,22 @@ fn help_explains_each_command() {
         assert!(text.contains(cmd), "{text}");
     }
 }
+
+#[test]
+fn a_bad_lidar_gate_is_refused_with_what_was_expected() {
+    for bad in ["nan", "-0.3", "0", "wide"] {
+        let o = rogs(&[
+            "reconstruct",
+            "x.zip",
+            "--out",
+            "x",
+            &format!("--lidar-gate={bad}"),
+        ]);
+        assert_eq!(o.status.code(), Some(2), "{bad}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            err.contains("expected a positive number of metres"),
+            "{err}"
+        );
+    }
+}

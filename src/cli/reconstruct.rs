@@ -69,7 +69,7 @@ pub struct Args {
     /// height are taken for cars, poles or walls and ignored by the LiDAR elevation
     /// loss (default 0.3). Raise it where the ground departs from the road's plane
     /// (verges, embankments).
-    #[arg(long)]
+    #[arg(long, value_parser = positive_metres)]
     lidar_gate: Option<f32>,
     /// Stop after this many steps (for timing part of an epoch on a large bundle;
     /// report.json then estimates seconds per epoch from the steps done).
@@ -191,6 +191,16 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
     } else {
         ExitCode::SUCCESS
     })
+}
+
+/// A distance in metres that must be positive and finite.
+fn positive_metres(s: &str) -> Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!(
+            "{s:?}: expected a positive number of metres, such as 0.3"
+        )),
+    }
 }
 
 fn write_files(dir: &std::path::Path, files: &[(String, Vec<u8>)]) -> Result<(), String> {

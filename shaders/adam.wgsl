@@ -13,8 +13,9 @@
 //! Moments: x and y stay fixed on the grid, so they have none; m and v are held for
 //! the L = 11 + channels learnable slots (z, rotation 4, log-scales 2, opacity, rgb 3,
 //! logits), learnable slot k being gradient slot k + 2. They are stored in blocks of
-//! 256 surfels (one workgroup), slot-major within a block: m of slot k for surfel i at
-//! ((i / 256)·2L + 2k)·256 + i % 256, v 256 words later. Neighbouring invocations so
+//! BLOCK = 256 surfels (one workgroup; the host prepends the constant), slot-major
+//! within a block: m of slot k for surfel i at ((i / B)·2L + 2k)·B + i % B, v B words
+//! later. Neighbouring invocations so
 //! read neighbouring words: on a CPU rasteriser such as lavapipe, whose SIMD lanes are
 //! neighbouring invocations, that is one vector load instead of a gather.
 //! A block holds all of its surfels' moments, so the moments can exceed one storage
@@ -55,7 +56,7 @@ struct AdamParams {
     exposure_at: u32,
     channels: u32,
     cameras: u32,
-    // The first surfel of this pass (a multiple of 256: its window starts a block).
+    // The first surfel of this pass (a multiple of BLOCK: its window starts a block).
     first: u32,
     // L, the learnable slots per surfel.
     learnable: u32,
@@ -103,10 +104,10 @@ fn adam(value: f32, g: f32, m0: f32, v0: f32, lr: f32) -> vec3<f32> {
 
 /// Learnable slot k of surfel i: its new value from `value`, storing the moments.
 fn step_slot(i: u32, k: u32, value: f32, g: f32, lr: f32) -> f32 {
-    let mi = (((i - ap.first) / 256u) * 2u * ap.learnable + 2u * k) * 256u + i % 256u;
-    let r = adam(value, g, moments[mi], moments[mi + 256u], lr);
+    let mi = (((i - ap.first) / BLOCK) * 2u * ap.learnable + 2u * k) * BLOCK + i % BLOCK;
+    let r = adam(value, g, moments[mi], moments[mi + BLOCK], lr);
     moments[mi] = r.y;
-    moments[mi + 256u] = r.z;
+    moments[mi + BLOCK] = r.z;
     return r.x;
 }
 
@@ -148,7 +149,7 @@ fn update_exposure() {
     }
 }
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(BLOCK)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let i = ap.first + gid.x + gid.y * ap.row;
     if i >= ap.end || status[0] != 0u {

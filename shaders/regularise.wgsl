@@ -48,8 +48,8 @@ struct RegParams {
 
 var<workgroup> red: array<vec3<f32>, 256>;
 
-// Surfels per invocation (the host dispatches ceil(count / (256 PER)) workgroups).
-const PER: u32 = 8u;
+// `PER`, the surfels per invocation, is prepended by the host (src/optim/train.rs),
+// which dispatches ceil(count / (256 PER)) workgroups.
 
 /// Surfel i's three loss terms; writes its z gradient and checks its membership.
 fn surfel(i: u32) -> vec3<f32> {

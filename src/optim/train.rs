@@ -155,11 +155,15 @@ pub fn check_fits(ctx: &GpuContext, surfels: usize, channels: usize) -> Result<(
     Ok(())
 }
 
-/// Surfels per block of Adam moments: the `adam` workgroup (shaders/adam.wgsl).
+/// Surfels per block of Adam moments: the `adam` workgroup (`BLOCK` in
+/// shaders/adam.wgsl), which `grid_1d`'s workgroups of 256 match.
 const MOMENT_BLOCK: u32 = 256;
 
-/// Bytes of one block's moments: m and v of every learnable slot for 256 surfels
-/// (a multiple of 256, so every block starts at an allowed binding offset).
+/// Surfels per `regularise` invocation (`PER` in shaders/regularise.wgsl).
+const REGULARISE_PER: u32 = 8;
+
+/// Bytes of one block's moments: m and v of every learnable slot for the block's
+/// surfels (a multiple of 256, so every block starts at an allowed binding offset).
 fn block_bytes(slots: u32) -> u64 {
     8 * slots as u64 * MOMENT_BLOCK as u64
 }
@@ -200,7 +204,10 @@ impl Trainer {
         check_fits(&ctx, p.len(), p.channels)?;
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let raster = GpuRasterizer::new(&ctx).await?;
-        let adam_src = include_str!("../../shaders/adam.wgsl");
+        // The shaders' layout constants come from here, so host and kernel agree.
+        let block = format!("const BLOCK: u32 = {MOMENT_BLOCK}u;");
+        let adam_src = [block.as_str(), include_str!("../../shaders/adam.wgsl")];
+        let per = format!("const PER: u32 = {REGULARISE_PER}u;");
         let k = Kernels {
             loss: pipeline(
                 &ctx,
@@ -214,12 +221,13 @@ impl Trainer {
                 &[
                     VIEW_WGSL,
                     GUARD_WGSL,
+                    &per,
                     include_str!("../../shaders/regularise.wgsl"),
                 ],
                 "main",
             ),
-            adam: pipeline(&ctx, "adam", &[adam_src], "main"),
-            exposure: pipeline(&ctx, "adam_exposure", &[adam_src], "step_exposure"),
+            adam: pipeline(&ctx, "adam", &adam_src, "main"),
+            exposure: pipeline(&ctx, "adam_exposure", &adam_src, "step_exposure"),
         };
         let n = p.len() as u64;
         let slots = learnable(p.channels) as u32;
@@ -399,8 +407,7 @@ impl Trainer {
             &self.status,
         );
         let stride = VIEW_GRAD as u32 + ch;
-        // `regularise` handles 8 surfels per invocation (PER in its shader).
-        let (sg, srow) = grid_1d(ctx, n.div_ceil(8));
+        let (sg, srow) = grid_1d(ctx, n.div_ceil(REGULARISE_PER));
         let w = &self.reg;
         let rp: [u32; 8] = [
             n,

@@ -8,6 +8,7 @@ use crate::bev::{self, BevGeometry, BevImage};
 use crate::bundle::{Bundle, ClassRole, Problem};
 use crate::eval::{BevRaster, Metrics};
 use crate::gpu::{GpuContext, GpuError};
+use crate::init::align::{align_bundle, AlignConfig, AlignSummary};
 use crate::init::prepare::{lidar_world, prepare, PrepareConfig, PrepareError, PrepareReport};
 use crate::init::{PoseIndex, PosePlanes};
 use crate::loss::regularise::RegData;
@@ -41,18 +42,35 @@ pub enum ReconstructError {
     NoViews,
 }
 
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct ReconstructConfig {
     pub prepare: PrepareConfig,
     pub train: TrainConfig,
     /// Skip optimisation: the map is the IPM baseline (best-view colours on the
     /// initial surface).
     pub baseline_ipm: bool,
+    /// Correct each frame's height, roll and pitch from its LiDAR sweep before
+    /// anything uses the poses (when the LiDAR is in use); `None` keeps them.
+    pub align: Option<AlignConfig>,
+}
+
+impl Default for ReconstructConfig {
+    fn default() -> Self {
+        let mut prepare = PrepareConfig::default();
+        prepare.use_lidar = true;
+        Self {
+            prepare,
+            train: TrainConfig::default(),
+            baseline_ipm: false,
+            align: Some(AlignConfig::default()),
+        }
+    }
 }
 
 /// Wall time of each stage, milliseconds.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct Timings {
+    pub align_ms: f64,
     pub prepare_ms: f64,
     pub colour_ms: f64,
     pub gpu_setup_ms: f64,
@@ -92,6 +110,8 @@ pub struct Session {
     /// Surfels with a LiDAR elevation for L_z, and smoothness edges.
     pub with_lidar: usize,
     pub edges: usize,
+    /// What the pose alignment did, when it ran.
+    pub alignment: Option<AlignSummary>,
 }
 
 /// Dense channel and class id of every road class (the BEV semantic layer's choices).
@@ -107,13 +127,24 @@ pub fn road_channels(b: &Bundle) -> Vec<(usize, u8)> {
 
 impl Session {
     /// Prepares the surfels, initialises colours and uploads everything to the GPU.
+    /// Prepares a run on `b`. With `cfg.align` and LiDAR in use, the bundle's poses
+    /// are first corrected in place, so every later stage (and the caller) sees them.
     pub async fn new(
-        b: &Bundle,
+        b: &mut Bundle,
         cfg: ReconstructConfig,
         ctx: GpuContext,
     ) -> Result<Self, ReconstructError> {
-        let m = &b.manifest;
         let mut timings = Timings::default();
+        let t = Instant::now();
+        let alignment = match &cfg.align {
+            Some(a) if cfg.train.use_lidar && cfg.prepare.use_lidar => {
+                align_bundle(b, a)?.map(|a| AlignSummary::new(&a))
+            }
+            _ => None,
+        };
+        timings.align_ms = t.elapsed().as_secs_f64() * 1e3;
+        let b: &Bundle = b;
+        let m = &b.manifest;
         let t = Instant::now();
         let prepared = prepare(b, &cfg.prepare)?;
         timings.prepare_ms = t.elapsed().as_secs_f64() * 1e3;
@@ -185,6 +216,7 @@ impl Session {
             bytes_per_surfel_gpu: trainer.bytes_per_surfel(),
             with_lidar: reg.with_lidar,
             edges: reg.edges,
+            alignment,
             prepare_report: prepared.report,
             level: prepared.grid.level.clone(),
             grid: prepared.grid,
@@ -471,6 +503,7 @@ pub fn report(s: &Session, o: &Outcome, bundle: &str) -> serde_json::Value {
         "surfels": s.prepare_report,
         "gpu_bytes_per_surfel": s.bytes_per_surfel_gpu,
         "surfels_with_lidar": s.with_lidar,
+        "pose_alignment": s.alignment,
         "smoothness_edges": s.edges,
         "z_change_rms_m": (o.params.pos.iter().zip(&s.initial.pos)
             .map(|(a, b)| ((a[2] - b[2]) as f64).powi(2)).sum::<f64>()

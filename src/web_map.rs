@@ -47,7 +47,7 @@ pub async fn start_reconstruction(
     } else {
         serde_wasm_bindgen::from_value(settings).map_err(err)?
     };
-    let bundle = Bundle::from_zip_bytes(bytes, Limits::default()).map_err(err)?;
+    let mut bundle = Bundle::from_zip_bytes(bytes, Limits::default()).map_err(err)?;
     let mut c = ReconstructConfig::default();
     // The page defaults coarser than the paper's 5 cm so that the demo runs in a
     // minute or two on a CPU; the settings panel says so.
@@ -61,7 +61,7 @@ pub async fn start_reconstruction(
         c.prepare.init.method = crate::init::InitMethod::Nearest;
     }
     let ctx = GpuContext::new().await.map_err(err)?;
-    let session = Session::new(&bundle, c, ctx).await.map_err(err)?;
+    let session = Session::new(&mut bundle, c, ctx).await.map_err(err)?;
     let truth = BevRaster::from_bundle(&bundle).map_err(err)?;
     let geometry = session.geometry(truth.as_ref());
     Ok(Reconstruction {

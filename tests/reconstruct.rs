@@ -24,7 +24,7 @@ fn demo_bundle() -> Bundle {
     Bundle::from_zip_bytes(zip, Limits::default()).expect("valid bundle")
 }
 
-fn run(b: &Bundle, cfg: ReconstructConfig) -> (Session, rogs::reconstruct::Outcome) {
+fn run(b: &mut Bundle, cfg: ReconstructConfig) -> (Session, rogs::reconstruct::Outcome) {
     let mut s = pollster::block_on(Session::new(b, cfg, ctx())).expect("session");
     while pollster::block_on(s.step(b)).expect("step").is_some() {}
     let p = pollster::block_on(s.model()).expect("model");
@@ -34,17 +34,17 @@ fn run(b: &Bundle, cfg: ReconstructConfig) -> (Session, rogs::reconstruct::Outco
 
 #[test]
 fn demo_reconstruction_beats_the_ipm_baseline_and_meets_measured_floors() {
-    let b = demo_bundle();
+    let mut b = demo_bundle();
     let mut cfg = ReconstructConfig::default();
     cfg.prepare.grid.half_width = 4.0;
     cfg.train.holdout_every = Some(5);
-    let (s, o) = run(&b, cfg.clone());
+    let (s, o) = run(&mut b, cfg.clone());
     let m = o.metrics.clone().expect("truth metrics");
     let h = o.holdout.clone().expect("held-out views");
     eprintln!("trained: {m:?} {h:?}");
     assert_eq!(s.steps_done(), s.train_views.len());
     cfg.baseline_ipm = true;
-    let (_, ob) = run(&b, cfg);
+    let (_, ob) = run(&mut b, cfg);
     let mb = ob.metrics.expect("truth metrics");
     eprintln!("ipm: {mb:?}");
     let (e, eb) = (m.elevation_rmse_m.unwrap(), mb.elevation_rmse_m.unwrap());

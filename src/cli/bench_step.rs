@@ -21,7 +21,8 @@ pub fn run(
     no_subgroup_reduction: bool,
     moment_window: Option<usize>,
 ) -> Result<ExitCode, String> {
-    let b = Bundle::open(bundle, Limits::default(), &mut |_, _| {}).map_err(|e| e.to_string())?;
+    let mut b =
+        Bundle::open(bundle, Limits::default(), &mut |_, _| {}).map_err(|e| e.to_string())?;
     let mut cfg = ReconstructConfig::default();
     cfg.prepare.grid.resolution = resolution;
     cfg.prepare.grid.half_width = half_width;
@@ -31,7 +32,7 @@ pub fn run(
     let mut ctx = GpuContext::new_blocking().map_err(|e| e.to_string())?;
     ctx.report.subgroups &= !no_subgroup_reduction;
     let subgroups = ctx.report.subgroups;
-    let mut s = pollster::block_on(Session::new(&b, cfg, ctx)).map_err(|e| e.to_string())?;
+    let mut s = pollster::block_on(Session::new(&mut b, cfg, ctx)).map_err(|e| e.to_string())?;
     pollster::block_on(s.step(&b)).map_err(|e| e.to_string())?;
     let mut timer = PassTimer::install(&s.trainer.ctx);
     let mut wall = Vec::new();

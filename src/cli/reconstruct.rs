@@ -66,11 +66,21 @@ pub struct Args {
     #[arg(long)]
     lr_z_end: Option<f32>,
     /// LiDAR points farther than this (metres) from a surfel's trajectory-plane
-    /// height are taken for cars, poles or walls and ignored by the LiDAR elevation
-    /// loss (default 0.3). Raise it where the ground departs from the road's plane
-    /// (verges, embankments).
+    /// height are taken for walls or roofs and ignored by the LiDAR elevation loss
+    /// (default 0.5). Raise it where the ground departs further from the road's
+    /// plane (embankments).
     #[arg(long, value_parser = positive_metres)]
     lidar_gate: Option<f32>,
+    /// Of the points within the gate, those farther than this (metres) from the
+    /// lowest layer around the surfel are taken for the sides of cars (default 0.2).
+    /// Widen it when poses are noisy and --no-pose-align is set.
+    #[arg(long, value_parser = positive_metres)]
+    lidar_band: Option<f32>,
+    /// Keep the bundle's poses as they are. By default each frame's height, roll
+    /// and pitch are corrected so that its LiDAR sweep's ground agrees with the
+    /// other sweeps' (needs LiDAR; x, y and yaw are never changed).
+    #[arg(long)]
+    no_pose_align: bool,
     /// Stop after this many steps (for timing part of an epoch on a large bundle;
     /// report.json then estimates seconds per epoch from the steps done).
     #[arg(long)]
@@ -102,6 +112,12 @@ fn config(a: &Args) -> ReconstructConfig {
     if let Some(v) = a.lidar_gate {
         c.train.loss.lidar_gate_m = v;
     }
+    if let Some(v) = a.lidar_band {
+        c.train.loss.lidar_band_m = v;
+    }
+    if a.no_pose_align {
+        c.align = None;
+    }
     if let Some(v) = a.lr_z_start {
         c.train.lr.z_start = v;
     }
@@ -113,7 +129,7 @@ fn config(a: &Args) -> ReconstructConfig {
 
 pub fn run(a: Args) -> Result<ExitCode, String> {
     let mut bar = Progress::new("open");
-    let b = match Bundle::open(&a.bundle, Limits::default(), &mut |d, t| bar.update(d, t)) {
+    let mut b = match Bundle::open(&a.bundle, Limits::default(), &mut |d, t| bar.update(d, t)) {
         Ok(b) => b,
         Err(e) => {
             bar.finish();
@@ -127,7 +143,7 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
     let cfg = config(&a);
     let ctx = GpuContext::new_blocking().map_err(|e| e.to_string())?;
     eprintln!("preparing surfels…");
-    let mut s = pollster::block_on(Session::new(&b, cfg, ctx)).map_err(|e| e.to_string())?;
+    let mut s = pollster::block_on(Session::new(&mut b, cfg, ctx)).map_err(|e| e.to_string())?;
     eprintln!(
         "{} surfels ({} added by refinement), {} training views, {} held out",
         s.prepare_report.surfels,

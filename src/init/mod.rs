@@ -8,6 +8,7 @@
 //! baseline) takes the nearest pose's prediction alone. Pose neighbours come from a
 //! grid hash, never from all pairs.
 
+pub mod align;
 pub mod ipm;
 pub mod prepare;
 pub mod refine;

@@ -31,9 +31,12 @@ pub struct LossConfig {
     pub lidar: f32,
     /// LiDAR points within this xy distance of a surfel count for it, metres.
     pub lidar_radius_m: f32,
-    /// LiDAR points farther than this from the pose prior ẑ are not road (cars,
-    /// poles, walls), metres.
+    /// LiDAR points farther than this from the pose prior ẑ are not road (walls,
+    /// roofs), metres.
     pub lidar_gate_m: f32,
+    /// Of the points left, those farther than this from the surfel's lowest layer
+    /// (their lower quartile) are not road either (the sides of cars), metres.
+    pub lidar_band_m: f32,
     /// Pixels with rendered alpha below this are left out (nothing covers them).
     pub min_alpha: f32,
     /// The road mask is opened with a square of this side (pixels).
@@ -52,7 +55,8 @@ impl Default for LossConfig {
             huber_m: 0.05,
             lidar: 0.02,
             lidar_radius_m: 0.2,
-            lidar_gate_m: 0.3,
+            lidar_gate_m: 0.5,
+            lidar_band_m: 0.2,
             min_alpha: 0.5,
             open_px: 5,
             dilate_px: 10,

@@ -79,6 +79,10 @@ impl RegData {
                     }
                 });
                 zs.sort_by(f64::total_cmp);
+                if let Some(&low) = zs.get(zs.len() / 4) {
+                    let band = cfg.lidar_band_m as f64;
+                    zs.retain(|z| (z - low).abs() <= band);
+                }
                 let hit = (!zs.is_empty()).then(|| zs[zs.len() / 2]);
                 with_lidar += hit.is_some() as usize;
                 [

@@ -1,0 +1,408 @@
+//! Pose alignment in height from the LiDAR: each frame's height, roll and pitch are
+//! corrected so that its sweep's ground agrees with the ground every other sweep sees.
+//!
+//! Why: a pose error of 0.5° in roll or pitch tilts that frame's whole sweep, 9 cm
+//! at 10 m, and 5 cm of height error lifts it. Where a dozen sweeps overlap, the
+//! median of their returns keeps a few centimetres of that error, and the LiDAR prior
+//! then pins the map to it. The ground is seen by many sweeps, so these three degrees
+//! of freedom are observable from the LiDAR alone; the horizontal ones (x, y, yaw)
+//! are not, on a near-flat road, and are left alone.
+//!
+//! Model: to first order, a correction (a, b, c) of frame k moves a world point that
+//! lies (dx, dy) from the vehicle's origin by a + b·dx + c·dy in z: a plane per sweep.
+//! Each round takes, per cell of the ground raster, the median corrected height over
+//! every sweep that sees it (the consensus), then fits each sweep's plane to its
+//! residuals by Huber-weighted least squares. Only cells seen by several sweeps carry
+//! information. The mean correction is then removed: a shared offset or tilt of every
+//! frame is not observable from agreement, and the pose noise is taken to have none.
+//!
+//! Ground returns are chosen per sweep, in the vehicle frame: a ring of ranges, and
+//! heights within a band of the sweep's own near-ground level (the median height of its
+//! close returns), so objects well above the road do not enter; the residual cut and
+//! Huber weights deal with the low parts of objects.
+
+use crate::bundle::transform::apply;
+use crate::bundle::{Bundle, Problem};
+use crate::bundle::{Manifest, Mat4Rows};
+use glam::{DMat3, DVec3};
+
+/// Settings of the alignment (defaults for driving sweeps).
+#[derive(Clone, Debug, PartialEq)]
+pub struct AlignConfig {
+    /// Ground returns from this horizontal range band of the vehicle (m).
+    pub min_range_m: f64,
+    pub max_range_m: f64,
+    /// Returns within this height of the sweep's near-ground level (m).
+    pub ground_band_m: f64,
+    /// Consensus raster cell (m).
+    pub cell_m: f64,
+    /// A cell informs the fit when at least this many sweeps see it.
+    pub min_sweeps: usize,
+    /// Residuals beyond this are not ground (m); Huber threshold (m).
+    pub residual_cut_m: f64,
+    pub huber_m: f64,
+    pub rounds: usize,
+    /// The expected pose noise in height and in roll and pitch: only their ratio
+    /// matters, to choose the unobservable shared plane (see `remove_gauge`).
+    pub height_sigma_m: f64,
+    pub tilt_sigma_deg: f64,
+}
+
+impl Default for AlignConfig {
+    fn default() -> Self {
+        Self {
+            min_range_m: 3.0,
+            max_range_m: 30.0,
+            ground_band_m: 0.5,
+            cell_m: 0.25,
+            min_sweeps: 3,
+            residual_cut_m: 0.3,
+            huber_m: 0.03,
+            rounds: 8,
+            height_sigma_m: 0.05,
+            tilt_sigma_deg: 0.5,
+        }
+    }
+}
+
+/// Per frame (a, b, c): height (m) and slopes of the correction plane along world x
+/// and y; zero for frames without a sweep.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Alignment {
+    pub corrections: Vec<[f64; 3]>,
+    /// Sweeps that took part and ground returns used.
+    pub sweeps: usize,
+    pub returns: usize,
+    /// RMS of the Huber-inlier residuals to the consensus, before and after (m).
+    pub rms_before_m: f64,
+    pub rms_after_m: f64,
+}
+
+/// The alignment in a report: how much it moved the poses, how well they agree.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct AlignSummary {
+    pub sweeps: usize,
+    pub ground_returns: usize,
+    pub height_rms_m: f64,
+    pub tilt_rms_deg: f64,
+    pub residual_rms_before_m: f64,
+    pub residual_rms_after_m: f64,
+}
+
+impl AlignSummary {
+    pub fn new(a: &Alignment) -> Self {
+        let n = a.sweeps.max(1) as f64;
+        let rms = |f: &dyn Fn(&[f64; 3]) -> f64| {
+            (a.corrections.iter().map(|c| f(c).powi(2)).sum::<f64>() / n).sqrt()
+        };
+        Self {
+            sweeps: a.sweeps,
+            ground_returns: a.returns,
+            height_rms_m: rms(&|c| c[0]),
+            tilt_rms_deg: rms(&|c| c[1].hypot(c[2])).to_degrees(),
+            residual_rms_before_m: a.rms_before_m,
+            residual_rms_after_m: a.rms_after_m,
+        }
+    }
+}
+
+/// One ground return: world xy, height, offset from its vehicle's origin, sweep.
+#[derive(Clone, Copy, Debug)]
+pub struct GroundReturn {
+    pub xy: [f64; 2],
+    pub z: f64,
+    pub d: [f64; 2],
+    pub sweep: u32,
+}
+
+/// The ground returns of every frame's sweep, through the bundle's poses.
+pub fn ground_returns(b: &Bundle, cfg: &AlignConfig) -> Result<Vec<GroundReturn>, Problem> {
+    let m = &b.manifest;
+    let Some(sensor) = &m.lidar else {
+        return Ok(Vec::new());
+    };
+    let mut out = Vec::new();
+    for (k, f) in m.frames.iter().enumerate() {
+        let Some(path) = &f.lidar else { continue };
+        let pts: Vec<[f64; 3]> = b
+            .read_lidar(path)?
+            .into_iter()
+            .map(|p| apply(&sensor.lidar_to_vehicle, p.map(|v| v as f64)))
+            .collect();
+        out.extend(sweep_ground(&pts, &f.vehicle_to_world, k as u32, cfg));
+    }
+    Ok(out)
+}
+
+/// The ground returns of one sweep (points in the vehicle frame).
+pub fn sweep_ground(
+    pts: &[[f64; 3]],
+    pose: &Mat4Rows,
+    sweep: u32,
+    cfg: &AlignConfig,
+) -> Vec<GroundReturn> {
+    let range = |p: &[f64; 3]| p[0].hypot(p[1]);
+    // The sweep's near-ground level: the median height of its close returns.
+    let mut near: Vec<f64> = pts
+        .iter()
+        .filter(|p| (cfg.min_range_m..cfg.min_range_m + 7.0).contains(&range(p)))
+        .map(|p| p[2])
+        .collect();
+    if near.is_empty() {
+        return Vec::new();
+    }
+    let mid = near.len() / 2;
+    let level = *near.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let origin = [pose[0][3], pose[1][3]];
+    pts.iter()
+        .filter(|p| {
+            (cfg.min_range_m..cfg.max_range_m).contains(&range(p))
+                && (p[2] - level).abs() <= cfg.ground_band_m
+        })
+        .map(|p| {
+            let w = apply(pose, *p);
+            GroundReturn {
+                xy: [w[0], w[1]],
+                z: w[2],
+                d: [w[0] - origin[0], w[1] - origin[1]],
+                sweep,
+            }
+        })
+        .collect()
+}
+
+/// Aligns the bundle's poses in place when it has LiDAR, and says what it did.
+pub fn align_bundle(b: &mut Bundle, cfg: &AlignConfig) -> Result<Option<Alignment>, Problem> {
+    let returns = ground_returns(b, cfg)?;
+    if returns.is_empty() {
+        return Ok(None);
+    }
+    let a = align(&returns, b.manifest.frames.len(), cfg);
+    apply_to_poses(&a, &mut b.manifest);
+    Ok(Some(a))
+}
+
+/// Estimates the corrections of `frames` frames from their ground returns.
+pub fn align(returns: &[GroundReturn], frames: usize, cfg: &AlignConfig) -> Alignment {
+    let cells = Cells::new(returns, cfg);
+    let mut corr = vec![[0.0f64; 3]; frames];
+    let mut rms = Vec::new();
+    for round in 0..=cfg.rounds {
+        let z: Vec<f64> = returns.iter().map(|r| corrected(r, &corr)).collect();
+        let cons = cells.consensus(&z);
+        // Per sweep, the normal equations of the plane fit to −residual.
+        let mut ata = vec![[0.0f64; 6]; frames];
+        let mut atb = vec![[0.0f64; 3]; frames];
+        let (mut sq, mut inl) = (0.0, 0usize);
+        for (i, r) in returns.iter().enumerate() {
+            let Some(c) = cons[cells.cell_of[i] as usize] else {
+                continue;
+            };
+            let e = z[i] - c;
+            if e.abs() > cfg.residual_cut_m {
+                continue;
+            }
+            if e.abs() <= cfg.huber_m {
+                sq += e * e;
+                inl += 1;
+            }
+            let w = (cfg.huber_m / e.abs().max(1e-12)).min(1.0);
+            let a = [1.0, r.d[0], r.d[1]];
+            let s = r.sweep as usize;
+            let m = &mut ata[s];
+            let mut k = 0;
+            for p in 0..3 {
+                for q in p..3 {
+                    m[k] += w * a[p] * a[q];
+                    k += 1;
+                }
+                atb[s][p] -= w * a[p] * e;
+            }
+        }
+        rms.push((sq / inl.max(1) as f64).sqrt());
+        if round == cfg.rounds {
+            break;
+        }
+        for (s, c) in corr.iter_mut().enumerate() {
+            // A sweep with too few or collinear returns keeps its correction.
+            if let Some(d) = solve3(&ata[s], &atb[s], 30.0) {
+                for p in 0..3 {
+                    c[p] += d[p];
+                }
+            }
+        }
+        remove_gauge(&mut corr, returns, cfg);
+    }
+    let mut used = vec![false; frames];
+    for r in returns {
+        used[r.sweep as usize] = true;
+    }
+    Alignment {
+        corrections: corr,
+        sweeps: used.iter().filter(|&&u| u).count(),
+        returns: returns.len(),
+        rms_before_m: rms.first().copied().unwrap_or(0.0),
+        rms_after_m: rms.last().copied().unwrap_or(0.0),
+    }
+}
+
+fn corrected(r: &GroundReturn, corr: &[[f64; 3]]) -> f64 {
+    let [a, b, c] = corr[r.sweep as usize];
+    r.z + a + b * r.d[0] + c * r.d[1]
+}
+
+/// Removes the part of the corrections no agreement can see: one world plane
+/// (height A, slopes B, C) added to every sweep, which in each sweep's own terms is
+/// a += A + B·ox + C·oy, b += B, c += C for its origin (ox, oy). The plane removed
+/// is the one that leaves the smallest corrections, each weighed by its expected
+/// noise: over a long drive the heights fix the tilt far better than the slopes do.
+fn remove_gauge(corr: &mut [[f64; 3]], returns: &[GroundReturn], cfg: &AlignConfig) {
+    let mut origin: Vec<Option<[f64; 2]>> = vec![None; corr.len()];
+    for r in returns {
+        origin[r.sweep as usize].get_or_insert([r.xy[0] - r.d[0], r.xy[1] - r.d[1]]);
+    }
+    let used: Vec<(usize, [f64; 2])> = origin
+        .iter()
+        .enumerate()
+        .filter_map(|(k, o)| o.map(|o| (k, o)))
+        .collect();
+    let n = used.len().max(1) as f64;
+    let o0 = used
+        .iter()
+        .fold([0.0; 2], |s, (_, o)| [s[0] + o[0] / n, s[1] + o[1] / n]);
+    let wa = 1.0 / cfg.height_sigma_m.powi(2);
+    let ws = 1.0 / cfg.tilt_sigma_deg.to_radians().powi(2);
+    let (mut m, mut rhs) = ([0.0f64; 6], [0.0f64; 3]);
+    for &(k, o) in &used {
+        let g = [1.0, o[0] - o0[0], o[1] - o0[1]];
+        let mut i = 0;
+        for p in 0..3 {
+            for q in p..3 {
+                m[i] += wa * g[p] * g[q];
+                i += 1;
+            }
+            rhs[p] += wa * g[p] * corr[k][0];
+        }
+        m[3] += ws;
+        m[5] += ws;
+        rhs[1] += ws * corr[k][1];
+        rhs[2] += ws * corr[k][2];
+    }
+    let Some([a, b, c]) = solve3(&m, &rhs, 1.0) else {
+        return;
+    };
+    for &(k, o) in &used {
+        corr[k][0] -= a + b * (o[0] - o0[0]) + c * (o[1] - o0[1]);
+        corr[k][1] -= b;
+        corr[k][2] -= c;
+    }
+}
+
+/// Solves the symmetric 3×3 system stored as its upper triangle (row-major), when
+/// its first diagonal entry (the weight of the data) reaches `min_weight`.
+fn solve3(m: &[f64; 6], b: &[f64; 3], min_weight: f64) -> Option<[f64; 3]> {
+    let a = DMat3::from_cols(
+        DVec3::new(m[0], m[1], m[2]),
+        DVec3::new(m[1], m[3], m[4]),
+        DVec3::new(m[2], m[4], m[5]),
+    );
+    if m[0] < min_weight || a.determinant().abs() < 1e-9 * m[0].powi(3).max(1.0) {
+        return None;
+    }
+    let x = a.inverse() * DVec3::from_array(*b);
+    Some(x.to_array())
+}
+
+/// The consensus raster: returns grouped by cell, with the cells that enough sweeps see.
+struct Cells {
+    cell_of: Vec<u32>,
+    /// Return indices of each cell, contiguous; `informative[c]` when enough sweeps.
+    start: Vec<usize>,
+    order: Vec<u32>,
+    informative: Vec<bool>,
+}
+
+impl Cells {
+    fn new(returns: &[GroundReturn], cfg: &AlignConfig) -> Self {
+        let key = |r: &GroundReturn| {
+            let i = (r.xy[0] / cfg.cell_m).floor() as i64;
+            let j = (r.xy[1] / cfg.cell_m).floor() as i64;
+            (i, j)
+        };
+        let mut order: Vec<u32> = (0..returns.len() as u32).collect();
+        order.sort_by_key(|&i| key(&returns[i as usize]));
+        let mut cell_of = vec![0u32; returns.len()];
+        let (mut start, mut informative) = (vec![0usize], Vec::new());
+        let mut sweeps: Vec<u32> = Vec::new();
+        for (n, &i) in order.iter().enumerate() {
+            let r = &returns[i as usize];
+            if n > 0 && key(r) != key(&returns[order[n - 1] as usize]) {
+                informative.push(distinct(&mut sweeps) >= cfg.min_sweeps);
+                start.push(n);
+            }
+            sweeps.push(r.sweep);
+            cell_of[i as usize] = start.len() as u32 - 1;
+        }
+        informative.push(distinct(&mut sweeps) >= cfg.min_sweeps);
+        start.push(order.len());
+        Self {
+            cell_of,
+            start,
+            order,
+            informative,
+        }
+    }
+
+    /// The median height of each informative cell.
+    fn consensus(&self, z: &[f64]) -> Vec<Option<f64>> {
+        let mut buf = Vec::new();
+        (0..self.informative.len())
+            .map(|c| {
+                if !self.informative[c] {
+                    return None;
+                }
+                buf.clear();
+                let ids = &self.order[self.start[c]..self.start[c + 1]];
+                buf.extend(ids.iter().map(|&i| z[i as usize]));
+                let mid = buf.len() / 2;
+                Some(*buf.select_nth_unstable_by(mid, f64::total_cmp).1)
+            })
+            .collect()
+    }
+}
+
+/// The number of distinct values in `v`, which it empties.
+fn distinct(v: &mut Vec<u32>) -> usize {
+    v.sort_unstable();
+    v.dedup();
+    let n = v.len();
+    v.clear();
+    n
+}
+
+/// Applies the corrections to the frames' vehicle-to-world poses: a rotation about
+/// the vehicle's origin by the slopes, then the height.
+pub fn apply_to_poses(a: &Alignment, m: &mut Manifest) {
+    for (f, &[h, bx, by]) in m.frames.iter_mut().zip(&a.corrections) {
+        let t = &mut f.vehicle_to_world;
+        // z gains bx·dx + by·dy: a rotation by (by, −bx, 0) (small angles).
+        let w = DVec3::new(by, -bx, 0.0);
+        let rot = if w.length() > 0.0 {
+            DMat3::from_axis_angle(w.normalize(), w.length())
+        } else {
+            DMat3::IDENTITY
+        };
+        let r = DMat3::from_cols(
+            DVec3::new(t[0][0], t[1][0], t[2][0]),
+            DVec3::new(t[0][1], t[1][1], t[2][1]),
+            DVec3::new(t[0][2], t[1][2], t[2][2]),
+        );
+        let r2 = rot * r;
+        for i in 0..3 {
+            for j in 0..3 {
+                t[i][j] = r2.col(j)[i];
+            }
+        }
+        t[2][3] += h;
+    }
+}

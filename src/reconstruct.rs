@@ -56,10 +56,12 @@ pub struct ReconstructConfig {
 
 impl Default for ReconstructConfig {
     fn default() -> Self {
-        let mut prepare = PrepareConfig::default();
-        prepare.use_lidar = true;
         Self {
-            prepare,
+            // As the CLI and the page: the LiDAR, when a bundle has one, is used.
+            prepare: PrepareConfig {
+                use_lidar: true,
+                ..Default::default()
+            },
             train: TrainConfig::default(),
             baseline_ipm: false,
             align: Some(AlignConfig::default()),

@@ -61,15 +61,18 @@ fn help_explains_each_command() {
 
 #[test]
 fn a_bad_lidar_gate_is_refused_with_what_was_expected() {
-    for bad in ["nan", "-0.3", "0", "wide"] {
+    for (flag, bad) in ["nan", "-0.3", "0", "wide"]
+        .into_iter()
+        .flat_map(|b| [("--lidar-gate", b), ("--lidar-band", b)])
+    {
         let o = rogs(&[
             "reconstruct",
             "x.zip",
             "--out",
             "x",
-            &format!("--lidar-gate={bad}"),
+            &format!("{flag}={bad}"),
         ]);
-        assert_eq!(o.status.code(), Some(2), "{bad}");
+        assert_eq!(o.status.code(), Some(2), "{flag} {bad}");
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(
             err.contains("expected a positive number of metres"),

@@ -38,8 +38,10 @@ pub struct AlignConfig {
     pub cell_m: f64,
     /// A cell informs the fit when at least this many sweeps see it.
     pub min_sweeps: usize,
-    /// Residuals beyond this are not ground (m); Huber threshold (m).
+    /// Residuals beyond this are not ground (m), halved every round down to
+    /// `min_cut_m`; Huber threshold (m).
     pub residual_cut_m: f64,
+    pub min_cut_m: f64,
     pub huber_m: f64,
     pub rounds: usize,
     /// The expected pose noise in height and in roll and pitch: only their ratio
@@ -57,6 +59,7 @@ impl Default for AlignConfig {
             cell_m: 0.25,
             min_sweeps: 3,
             residual_cut_m: 0.3,
+            min_cut_m: 0.05,
             huber_m: 0.03,
             rounds: 8,
             height_sigma_m: 0.05,
@@ -190,6 +193,9 @@ pub fn align(returns: &[GroundReturn], frames: usize, cfg: &AlignConfig) -> Alig
     for round in 0..=cfg.rounds {
         let z: Vec<f64> = returns.iter().map(|r| corrected(r, &corr)).collect();
         let cons = cells.consensus(&z);
+        // The cut narrows as the sweeps come together: wide enough at first for a
+        // 0.5° tilt at 30 m, then only what ground returns still disagree by.
+        let cut = (cfg.residual_cut_m * 0.5f64.powi(round as i32)).max(cfg.min_cut_m);
         // Per sweep, the normal equations of the plane fit to −residual.
         let mut ata = vec![[0.0f64; 6]; frames];
         let mut atb = vec![[0.0f64; 3]; frames];
@@ -199,7 +205,7 @@ pub fn align(returns: &[GroundReturn], frames: usize, cfg: &AlignConfig) -> Alig
                 continue;
             };
             let e = z[i] - c;
-            if e.abs() > cfg.residual_cut_m {
+            if e.abs() > cut {
                 continue;
             }
             if e.abs() <= cfg.huber_m {
@@ -207,17 +213,8 @@ pub fn align(returns: &[GroundReturn], frames: usize, cfg: &AlignConfig) -> Alig
                 inl += 1;
             }
             let w = (cfg.huber_m / e.abs().max(1e-12)).min(1.0);
-            let a = [1.0, r.d[0], r.d[1]];
             let s = r.sweep as usize;
-            let m = &mut ata[s];
-            let mut k = 0;
-            for p in 0..3 {
-                for q in p..3 {
-                    m[k] += w * a[p] * a[q];
-                    k += 1;
-                }
-                atb[s][p] -= w * a[p] * e;
-            }
+            accumulate(&mut ata[s], &mut atb[s], [1.0, r.d[0], r.d[1]], w, -e);
         }
         rms.push((sq / inl.max(1) as f64).sqrt());
         if round == cfg.rounds {
@@ -275,14 +272,7 @@ fn remove_gauge(corr: &mut [[f64; 3]], returns: &[GroundReturn], cfg: &AlignConf
     let (mut m, mut rhs) = ([0.0f64; 6], [0.0f64; 3]);
     for &(k, o) in &used {
         let g = [1.0, o[0] - o0[0], o[1] - o0[1]];
-        let mut i = 0;
-        for p in 0..3 {
-            for q in p..3 {
-                m[i] += wa * g[p] * g[q];
-                i += 1;
-            }
-            rhs[p] += wa * g[p] * corr[k][0];
-        }
+        accumulate(&mut m, &mut rhs, g, wa, corr[k][0]);
         m[3] += ws;
         m[5] += ws;
         rhs[1] += ws * corr[k][1];
@@ -295,6 +285,19 @@ fn remove_gauge(corr: &mut [[f64; 3]], returns: &[GroundReturn], cfg: &AlignConf
         corr[k][0] -= a + b * (o[0] - o0[0]) + c * (o[1] - o0[1]);
         corr[k][1] -= b;
         corr[k][2] -= c;
+    }
+}
+
+/// Adds the weighted observation `y ≈ g · x` to normal equations kept as the upper
+/// triangle of the symmetric matrix (row-major) and the right-hand side.
+fn accumulate(m: &mut [f64; 6], rhs: &mut [f64; 3], g: [f64; 3], w: f64, y: f64) {
+    let mut k = 0;
+    for p in 0..3 {
+        for q in p..3 {
+            m[k] += w * g[p] * g[q];
+            k += 1;
+        }
+        rhs[p] += w * g[p] * y;
     }
 }
 
@@ -353,10 +356,14 @@ impl Cells {
         }
     }
 
-    /// The median height of each informative cell.
+    /// The median height of each informative cell whose spread (median absolute
+    /// deviation) is ground-like: at most `SPREAD` times the typical cell's. Cells on
+    /// the sides of objects spread over their height, and would bias the sweeps that
+    /// see only part of them.
     fn consensus(&self, z: &[f64]) -> Vec<Option<f64>> {
+        const SPREAD: f64 = 3.0;
         let mut buf = Vec::new();
-        (0..self.informative.len())
+        let stats: Vec<Option<(f64, f64)>> = (0..self.informative.len())
             .map(|c| {
                 if !self.informative[c] {
                     return None;
@@ -364,11 +371,28 @@ impl Cells {
                 buf.clear();
                 let ids = &self.order[self.start[c]..self.start[c + 1]];
                 buf.extend(ids.iter().map(|&i| z[i as usize]));
-                let mid = buf.len() / 2;
-                Some(*buf.select_nth_unstable_by(mid, f64::total_cmp).1)
+                let med = median(&mut buf);
+                for v in buf.iter_mut() {
+                    *v = (*v - med).abs();
+                }
+                Some((med, median(&mut buf)))
             })
+            .collect();
+        let mut spreads: Vec<f64> = stats.iter().flatten().map(|s| s.1).collect();
+        if spreads.is_empty() {
+            return vec![None; stats.len()];
+        }
+        let limit = SPREAD * median(&mut spreads).max(0.003);
+        stats
+            .into_iter()
+            .map(|s| s.filter(|s| s.1 <= limit).map(|s| s.0))
             .collect()
     }
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    let mid = v.len() / 2;
+    *v.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
 /// The number of distinct values in `v`, which it empties.
@@ -398,9 +422,9 @@ pub fn apply_to_poses(a: &Alignment, m: &mut Manifest) {
             DVec3::new(t[0][2], t[1][2], t[2][2]),
         );
         let r2 = rot * r;
-        for i in 0..3 {
-            for j in 0..3 {
-                t[i][j] = r2.col(j)[i];
+        for (i, row) in t.iter_mut().take(3).enumerate() {
+            for (j, v) in row.iter_mut().take(3).enumerate() {
+                *v = r2.col(j)[i];
             }
         }
         t[2][3] += h;

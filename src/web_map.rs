@@ -22,6 +22,7 @@ struct Settings {
     half_width: Option<f64>,
     epochs: Option<usize>,
     lidar: Option<bool>,
+    align: Option<bool>,
     adaptive: Option<bool>,
     init: Option<String>,
 }
@@ -56,6 +57,9 @@ pub async fn start_reconstruction(
     c.train.epochs = s.epochs.unwrap_or(1);
     c.train.use_lidar = s.lidar.unwrap_or(true);
     c.prepare.use_lidar = c.train.use_lidar;
+    if s.align == Some(false) {
+        c.align = None;
+    }
     c.prepare.refine.enabled = s.adaptive.unwrap_or(true);
     if s.init.as_deref() == Some("nearest") {
         c.prepare.init.method = crate::init::InitMethod::Nearest;

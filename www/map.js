@@ -26,6 +26,7 @@ function settings() {
     resolution: Number($('set-resolution').value),
     epochs: Number($('set-epochs').value),
     lidar: $('set-lidar').checked,
+    align: $('set-align').checked,
     adaptive: $('set-adaptive').checked,
     init: $('set-init').value,
   };

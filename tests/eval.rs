@@ -64,6 +64,10 @@ fn miou_of_a_perturbation_equals_hand_computation() {
     assert!((miou(&p, &t, &[0, 1, 2]).unwrap() - expected).abs() < 1e-12);
     // Class 2 is absent from both and does not count; a non-road class is not scored.
     assert!((miou(&p, &t, &[0]).unwrap() - 36.0 / 45.0).abs() < 1e-12);
+    let per = rogs::eval::class_iou(&p, &t, &[0, 1, 2]);
+    assert_eq!(per.len(), 2);
+    assert_eq!(per[0].0, 0);
+    assert!((per[0].1 - 36.0 / 45.0).abs() < 1e-12 && (per[1].1 - 45.0 / 54.0).abs() < 1e-12);
 }
 
 #[test]

@@ -125,10 +125,14 @@ async function optimise(setStatus) {
 
 function showMetrics(report) {
   const m = report.metrics;
+  const a = report.pose_alignment;
+  const aligned = a
+    ? ` Poses aligned to the LiDAR: ${(a.height_rms_m * 100).toFixed(1)} cm and ${a.tilt_rms_deg.toFixed(2)}° RMS.`
+    : '';
   const el = $('metrics');
-  if (!m) { el.textContent = 'No ground truth or LiDAR in this bundle: no metrics.'; return; }
+  if (!m) { el.textContent = `No ground truth or LiDAR in this bundle: no metrics.${aligned}`; return; }
   const f = (v, d, u) => (v === null || v === undefined ? '–' : `${v.toFixed(d)}${u}`);
-  el.textContent = `PSNR ${f(m.psnr_db, 2, ' dB')} · mIoU ${f(m.miou, 3, '')} · elevation RMSE ${f(m.elevation_rmse_m * 100, 1, ' cm')}`;
+  el.textContent = `PSNR ${f(m.psnr_db, 2, ' dB')} · mIoU ${f(m.miou, 3, '')} · elevation RMSE ${f(m.elevation_rmse_m * 100, 1, ' cm')}.${aligned}`;
 }
 
 function setLayer(name, px, w, h) {

@@ -13,6 +13,9 @@ pub struct Metrics {
     pub elevation_rmse_m: Option<f64>,
     pub elevation_mae_m: Option<f64>,
     pub elevation_p95_m: Option<f64>,
+    /// IoU of each road class (by class id) that `miou` averages.
+    #[serde(skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub iou_per_class: std::collections::BTreeMap<u8, f64>,
 }
 
 /// PSNR (dB, peak 1.0) of `pred` against `truth` over pixels valid in both. Both
@@ -42,6 +45,12 @@ pub fn psnr(pred: &BevRaster, truth: &BevRaster) -> Option<f64> {
 
 /// Mean IoU over `road_classes` that occur in the truth or the prediction (valid pixels).
 pub fn miou(pred: &BevRaster, truth: &BevRaster, road_classes: &[u8]) -> Option<f64> {
+    let ious = class_iou(pred, truth, road_classes);
+    (!ious.is_empty()).then(|| ious.iter().map(|c| c.1).sum::<f64>() / ious.len() as f64)
+}
+
+/// IoU of each of `road_classes` that occurs in the truth or the prediction.
+pub fn class_iou(pred: &BevRaster, truth: &BevRaster, road_classes: &[u8]) -> Vec<(u8, f64)> {
     let mut inter = [0u64; 256];
     let mut union = [0u64; 256];
     for_valid_pairs(pred, truth, |p, t| {
@@ -57,12 +66,11 @@ pub fn miou(pred: &BevRaster, truth: &BevRaster, road_classes: &[u8]) -> Option<
             union[b as usize] += 1;
         }
     });
-    let ious: Vec<f64> = road_classes
+    road_classes
         .iter()
         .filter(|&&c| union[c as usize] > 0)
-        .map(|&c| inter[c as usize] as f64 / union[c as usize] as f64)
-        .collect();
-    (!ious.is_empty()).then(|| ious.iter().sum::<f64>() / ious.len() as f64)
+        .map(|&c| (c, inter[c as usize] as f64 / union[c as usize] as f64))
+        .collect()
 }
 
 fn for_valid_pairs(pred: &BevRaster, truth: &BevRaster, mut f: impl FnMut((u32, u32), (u32, u32))) {

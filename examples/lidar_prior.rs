@@ -4,7 +4,7 @@
 //! that of ẑ (the trajectory plane), as JSON. Seconds instead of a reconstruction, so
 //! gate settings can be compared quickly.
 //!
-//! `cargo run --release --example lidar_prior -- BUNDLE [RESOLUTION_M] [GATE_M]`
+//! `cargo run --release --example lidar_prior -- BUNDLE.zip [RESOLUTION_M] [GATE_M]`
 //! (environment: `BAND=M` sets the lowest-layer band, `NO_ALIGN=1` keeps the poses)
 
 use rogs::bundle::{Bundle, Limits};
@@ -20,8 +20,10 @@ fn main() -> Result<(), String> {
     let path = args
         .first()
         .ok_or("usage: lidar_prior BUNDLE [RES] [GATE]")?;
-    let b = Bundle::open(path.as_ref(), Limits::default(), &mut |_, _| {})
-        .map_err(|e| e.to_string())?;
+    // Read as bytes rather than with `Bundle::open`, so the example also builds for
+    // wasm32, which `cargo test --target wasm32-unknown-unknown` compiles.
+    let bytes = std::fs::read(path).map_err(|e| format!("{path}: {e}"))?;
+    let b = Bundle::from_zip_bytes(bytes, Limits::default()).map_err(|e| e.to_string())?;
     let truth = BevRaster::from_bundle(&b)
         .map_err(|e| e.to_string())?
         .ok_or("the bundle has no ground truth")?;

@@ -14,7 +14,7 @@ cargo fmt --all -- --check
 step "cargo clippy (native)"
 cargo clippy --all-targets -- -D warnings
 step "cargo clippy (wasm32)"
-cargo clippy --target wasm32-unknown-unknown --lib --tests -- -D warnings
+cargo clippy --target wasm32-unknown-unknown --all-targets -- -D warnings
 
 step "native tests on $(WGPU_BACKEND=$WGPU_BACKEND echo "$WGPU_BACKEND")"
 cargo build --bins --examples

@@ -24,6 +24,7 @@
 use crate::bundle::transform::apply;
 use crate::bundle::{Bundle, Problem};
 use crate::bundle::{Manifest, Mat4Rows};
+use crate::init::prepare::for_each_sweep;
 use glam::{DMat3, DVec3};
 
 /// Settings of the alignment (defaults for driving sweeps).
@@ -120,20 +121,10 @@ pub struct GroundReturn {
 
 /// The ground returns of every frame's sweep, through the bundle's poses.
 pub fn ground_returns(b: &Bundle, cfg: &AlignConfig) -> Result<Vec<GroundReturn>, Problem> {
-    let m = &b.manifest;
-    let Some(sensor) = &m.lidar else {
-        return Ok(Vec::new());
-    };
     let mut out = Vec::new();
-    for (k, f) in m.frames.iter().enumerate() {
-        let Some(path) = &f.lidar else { continue };
-        let pts: Vec<[f64; 3]> = b
-            .read_lidar(path)?
-            .into_iter()
-            .map(|p| apply(&sensor.lidar_to_vehicle, p.map(|v| v as f64)))
-            .collect();
-        out.extend(sweep_ground(&pts, &f.vehicle_to_world, k as u32, cfg));
-    }
+    for_each_sweep(b, |k, pose, pts| {
+        out.extend(sweep_ground(&pts, pose, k as u32, cfg))
+    })?;
     Ok(out)
 }
 
@@ -188,6 +179,7 @@ pub fn align_bundle(b: &mut Bundle, cfg: &AlignConfig) -> Result<Option<Alignmen
 /// Estimates the corrections of `frames` frames from their ground returns.
 pub fn align(returns: &[GroundReturn], frames: usize, cfg: &AlignConfig) -> Alignment {
     let cells = Cells::new(returns, cfg);
+    let origins = sweep_origins(returns, frames);
     let mut corr = vec![[0.0f64; 3]; frames];
     let mut rms = Vec::new();
     for round in 0..=cfg.rounds {
@@ -228,15 +220,11 @@ pub fn align(returns: &[GroundReturn], frames: usize, cfg: &AlignConfig) -> Alig
                 }
             }
         }
-        remove_gauge(&mut corr, returns, cfg);
-    }
-    let mut used = vec![false; frames];
-    for r in returns {
-        used[r.sweep as usize] = true;
+        remove_gauge(&mut corr, &origins, cfg);
     }
     Alignment {
         corrections: corr,
-        sweeps: used.iter().filter(|&&u| u).count(),
+        sweeps: origins.len(),
         returns: returns.len(),
         rms_before_m: rms.first().copied().unwrap_or(0.0),
         rms_after_m: rms.last().copied().unwrap_or(0.0),
@@ -253,16 +241,7 @@ fn corrected(r: &GroundReturn, corr: &[[f64; 3]]) -> f64 {
 /// a += A + B·ox + C·oy, b += B, c += C for its origin (ox, oy). The plane removed
 /// is the one that leaves the smallest corrections, each weighed by its expected
 /// noise: over a long drive the heights fix the tilt far better than the slopes do.
-fn remove_gauge(corr: &mut [[f64; 3]], returns: &[GroundReturn], cfg: &AlignConfig) {
-    let mut origin: Vec<Option<[f64; 2]>> = vec![None; corr.len()];
-    for r in returns {
-        origin[r.sweep as usize].get_or_insert([r.xy[0] - r.d[0], r.xy[1] - r.d[1]]);
-    }
-    let used: Vec<(usize, [f64; 2])> = origin
-        .iter()
-        .enumerate()
-        .filter_map(|(k, o)| o.map(|o| (k, o)))
-        .collect();
+fn remove_gauge(corr: &mut [[f64; 3]], used: &[(usize, [f64; 2])], cfg: &AlignConfig) {
     let n = used.len().max(1) as f64;
     let o0 = used
         .iter()
@@ -270,7 +249,7 @@ fn remove_gauge(corr: &mut [[f64; 3]], returns: &[GroundReturn], cfg: &AlignConf
     let wa = 1.0 / cfg.height_sigma_m.powi(2);
     let ws = 1.0 / cfg.tilt_sigma_deg.to_radians().powi(2);
     let (mut m, mut rhs) = ([0.0f64; 6], [0.0f64; 3]);
-    for &(k, o) in &used {
+    for &(k, o) in used {
         let g = [1.0, o[0] - o0[0], o[1] - o0[1]];
         accumulate(&mut m, &mut rhs, g, wa, corr[k][0]);
         m[3] += ws;
@@ -281,7 +260,7 @@ fn remove_gauge(corr: &mut [[f64; 3]], returns: &[GroundReturn], cfg: &AlignConf
     let Some([a, b, c]) = solve3(&m, &rhs, 1.0) else {
         return;
     };
-    for &(k, o) in &used {
+    for &(k, o) in used {
         corr[k][0] -= a + b * (o[0] - o0[0]) + c * (o[1] - o0[1]);
         corr[k][1] -= b;
         corr[k][2] -= c;
@@ -299,6 +278,19 @@ fn accumulate(m: &mut [f64; 6], rhs: &mut [f64; 3], g: [f64; 3], w: f64, y: f64)
         }
         rhs[p] += w * g[p] * y;
     }
+}
+
+/// The world xy origin of each sweep that has returns, with its frame index.
+fn sweep_origins(returns: &[GroundReturn], frames: usize) -> Vec<(usize, [f64; 2])> {
+    let mut origin: Vec<Option<[f64; 2]>> = vec![None; frames];
+    for r in returns {
+        origin[r.sweep as usize].get_or_insert([r.xy[0] - r.d[0], r.xy[1] - r.d[1]]);
+    }
+    origin
+        .iter()
+        .enumerate()
+        .filter_map(|(k, o)| o.map(|o| (k, o)))
+        .collect()
 }
 
 /// Solves the symmetric 3×3 system stored as its upper triangle (row-major), when

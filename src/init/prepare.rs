@@ -4,7 +4,7 @@
 use super::refine::{refine, RefineConfig, RefineReport};
 use super::{initialise, initialise_into, InitConfig, InitResult, PoseIndex, PosePlanes};
 use crate::bundle::transform::apply;
-use crate::bundle::{Bundle, Problem};
+use crate::bundle::{Bundle, Mat4Rows, Problem};
 use crate::grid::{Grid, GridConfig, GridError, Surfels};
 use serde::Serialize;
 use thiserror::Error;
@@ -50,25 +50,36 @@ pub struct Prepared {
     pub report: PrepareReport,
 }
 
+/// Calls `f(frame index, vehicle-to-world pose, points in the vehicle frame)` for
+/// every frame that has a LiDAR sweep.
+pub fn for_each_sweep(
+    b: &Bundle,
+    mut f: impl FnMut(usize, &Mat4Rows, Vec<[f64; 3]>),
+) -> Result<(), Problem> {
+    let m = &b.manifest;
+    let Some(sensor) = &m.lidar else {
+        return Ok(());
+    };
+    for (k, fr) in m.frames.iter().enumerate() {
+        let Some(path) = &fr.lidar else { continue };
+        let pts = b.read_lidar(path)?;
+        let pts = pts
+            .into_iter()
+            .map(|p| apply(&sensor.lidar_to_vehicle, p.map(|v| v as f64)))
+            .collect();
+        f(k, &fr.vehicle_to_world, pts);
+    }
+    Ok(())
+}
+
 /// Every LiDAR point of the bundle in the world frame (through the bundle's poses),
 /// with the index of the sweep it came from.
 pub fn lidar_world(b: &Bundle) -> Result<(Vec<[f64; 3]>, Vec<u32>), Problem> {
-    let m = &b.manifest;
-    let Some(sensor) = &m.lidar else {
-        return Ok((Vec::new(), Vec::new()));
-    };
     let (mut out, mut sweep) = (Vec::new(), Vec::new());
-    for (k, f) in m.frames.iter().enumerate() {
-        let Some(path) = &f.lidar else { continue };
-        let t = &f.vehicle_to_world;
-        for p in b.read_lidar(path)? {
-            out.push(apply(
-                t,
-                apply(&sensor.lidar_to_vehicle, p.map(|v| v as f64)),
-            ));
-            sweep.push(k as u32);
-        }
-    }
+    for_each_sweep(b, |k, t, pts| {
+        out.extend(pts.into_iter().map(|p| apply(t, p)));
+        sweep.resize(out.len(), k as u32);
+    })?;
     Ok((out, sweep))
 }
 

@@ -4,13 +4,21 @@
 //! (`eval_surfel`); a pixel stops once its transmittance would drop below 1e-4, the
 //! invocation when all four have. Four pixels share each surfel's loads (list entry,
 //! reach, projected parameters, colour, logits), as in `rasterize_backward`, and are
-//! named variables rather than an array, which SwiftShader would keep in memory. A four-compare reach test (`out_of_reach`) comes before the
+//! named variables rather than an array, which SwiftShader would keep in memory. A
+//! four-compare reach test (`out_of_reach`) comes before the
 //! evaluation: most pairs of a far tile are out of reach, and pixels that never
 //! saturate (sky, road beyond the far plane) walk the whole list. Measured on lavapipe:
 //! 8×8 tiles halve the time of 16×16 ones (pixels that never saturate walk fewer
 //! surfels; 4×4 loses it again to the extra pairs), and staging the list in workgroup
-//! memory behind barriers gained nothing over reading storage directly. Logits have a
-//! runtime channel count, so they accumulate in the output buffer, not in registers.
+//! memory behind barriers gained nothing over reading storage directly.
+//!
+//! Logits: the channel count is the model's, fixed when the pipeline is built (`CH`,
+//! prepended by the host, any count). The four pixels' sums live in registers, one
+//! vec4 per channel (lane j = pixel j), so a composited surfel adds its logit times
+//! the four weights in one multiply-add per channel and the output is written once
+//! per pixel. Accumulating in the output buffer instead (a load and a store per pixel
+//! and channel, scattered) cost 35 % of this kernel on lavapipe; SwiftShader keeps
+//! the array in memory, and it is faster there too (docs/PERFORMANCE.md).
 //!
 //! With `view.masked` (training), pixels outside the loss mask (class 255 in the packed
 //! target) composite nothing: the loss ignores them, so their outputs and gradients
@@ -59,9 +67,6 @@ fn start_pixel(x: u32, y: u32) -> Pixel {
     p.t = 1.0;
     if x < view.width && y < view.height {
         p.pix = y * view.width + x;
-        for (var j = 0u; j < view.channels; j++) {
-            out_logits[p.pix * view.channels + j] = 0.0;
-        }
         p.on = view.masked == 0u || (target_px[p.pix] >> 24u) != 255u;
     }
     return p;
@@ -103,16 +108,18 @@ fn blend(p: ptr<function, Pixel>, col: vec3<f32>, z: f32) {
     }
 }
 
-fn blend_logit(p: ptr<function, Pixel>, q: u32, l: f32) {
-    if (*p).live {
-        let o = (*p).pix * view.channels + q;
-        out_logits[o] += l * (*p).w;
-    }
+/// The pixel's weight of the current surfel (0 where it is not composited).
+fn weight(p: Pixel) -> f32 {
+    return select(0.0, p.w, p.live);
 }
 
-fn finish(p: Pixel, x: u32, y: u32, gain: f32) {
+/// Writes pixel j's outputs; `l` holds the four pixels' logits (lane j is this one).
+fn finish(p: Pixel, x: u32, y: u32, gain: f32, l: ptr<function, array<vec4<f32>, CH_ARRAY>>, j: u32) {
     if x >= view.width || y >= view.height {
         return;
+    }
+    for (var q = 0u; q < CH; q++) {
+        out_logits[p.pix * CH + q] = (*l)[q][j];
     }
     let o = PIX_STRIDE * p.pix;
     for (var j = 0u; j < 3u; j++) {
@@ -130,7 +137,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
     let tile = wg.x + wg.y * view.tiles_x;
     let x = wg.x * TILE + lid.x;
     let y = wg.y * TILE + 4u * lid.y;
-    let ch = view.channels;
     if li == 0u {
         range = vec2<u32>(ranges[2u * tile], ranges[2u * tile + 1u]);
     }
@@ -139,6 +145,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
     var b = start_pixel(x, y + 1u);
     var c = start_pixel(x, y + 2u);
     var d = start_pixel(x, y + 3u);
+    var l: array<vec4<f32>, CH_ARRAY>;
     for (var k = r.x; k < r.y; k++) {
         if !(a.on || b.on || c.on || d.on) {
             break;
@@ -159,17 +166,14 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
         blend(&b, col, s.pc.z);
         blend(&c, col, s.pc.z);
         blend(&d, col, s.pc.z);
-        for (var q = 0u; q < ch; q++) {
-            let l = logits[si * ch + q];
-            blend_logit(&a, q, l);
-            blend_logit(&b, q, l);
-            blend_logit(&c, q, l);
-            blend_logit(&d, q, l);
+        let w = vec4<f32>(weight(a), weight(b), weight(c), weight(d));
+        for (var q = 0u; q < CH; q++) {
+            l[q] += logits[si * CH + q] * w;
         }
     }
     let gain = exp(view.exposure_a);
-    finish(a, x, y, gain);
-    finish(b, x, y + 1u, gain);
-    finish(c, x, y + 2u, gain);
-    finish(d, x, y + 3u, gain);
+    finish(a, x, y, gain, &l, 0u);
+    finish(b, x, y + 1u, gain, &l, 1u);
+    finish(c, x, y + 2u, gain, &l, 2u);
+    finish(d, x, y + 3u, gain, &l, 3u);
 }

@@ -17,11 +17,14 @@
 //! and that cost more than the adds it saved (measured in docs/PERFORMANCE.md). Pixels read the list
 //! straight from storage: on lavapipe, staging batches in workgroup memory behind
 //! barriers was no faster. The exposure gradient is reduced over the workgroup
-//! first, then added once. The logits (runtime channel count) need no per-pixel
-//! accumulators: their share of dL/dalpha is Σ_q (l_q − acc_q)·dl_q, and since dl is
-//! fixed per pixel the accumulated Σ_q acc_q·dl_q follows the same recurrence as
-//! acc_q, so two scalars carry it (the oracle keeps one accumulator per channel,
-//! which is the same sum).
+//! first, then added once. The logits need no per-pixel accumulators: their share of
+//! dL/dalpha is Σ_q (l_q − acc_q)·dl_q, and since dl is fixed per pixel the
+//! accumulated Σ_q acc_q·dl_q follows the same recurrence as acc_q, so two scalars
+//! carry it (the oracle keeps one accumulator per channel, which is the same sum).
+//! The four pixels' logit gradients dl are read once, before the walk, into
+//! registers, one vec4 per channel (`CH`, the model's channel count, is fixed when
+//! the pipeline is built): reading them per surfel, scattered, cost a fifth of this
+//! kernel on lavapipe.
 //!
 //! Oracle: src/render/rasterize_backward.rs; slot layout `slot::*` there.
 
@@ -137,7 +140,6 @@ fn evaluate(p: ptr<function, Pixel>, s: Surfel) -> bool {
 
 /// Colour step of a used surfel: transmittance, weight, colour term of dL/dalpha.
 fn colour(p: ptr<function, Pixel>, c: vec3<f32>) {
-    (*p).l_dot = 0.0;
     if !(*p).live {
         return;
     }
@@ -149,15 +151,19 @@ fn colour(p: ptr<function, Pixel>, c: vec3<f32>) {
     (*p).d_alpha = dot(c - (*p).acc_c, (*p).dc);
 }
 
-/// Channel q's logit `l` of a used surfel: adds l·dl to Σ_q l_q·dl_q and returns the
-/// logit's gradient from this pixel.
-fn logit(p: ptr<function, Pixel>, q: u32, l: f32) -> f32 {
-    if !(*p).live {
-        return 0.0;
+/// The pixel's weight of the current surfel (0 where it does not use it).
+fn weight(p: Pixel) -> f32 {
+    return select(0.0, p.w, p.live);
+}
+
+/// Reads pixel j's logit gradients into lane j of `dl`.
+fn load_dl(p: Pixel, x: u32, y: u32, dl: ptr<function, array<vec4<f32>, CH_ARRAY>>, j: u32) {
+    if x >= view.width || y >= view.height {
+        return;
     }
-    let dl = g_logits[(*p).pix * view.channels + q];
-    (*p).l_dot += l * dl;
-    return (*p).w * dl;
+    for (var q = 0u; q < CH; q++) {
+        (*dl)[q][j] = g_logits[p.pix * CH + q];
+    }
 }
 
 /// The rest of a used surfel's gradients from pixel `p` (zero where it is not used).
@@ -222,8 +228,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
     let tile = wg.x + wg.y * view.tiles_x;
     let x = wg.x * TILE + lid.x;
     let y = wg.y * TILE + 4u * lid.y;
-    let ch = view.channels;
-    let stride = S_LOGITS + ch;
+    let stride = S_LOGITS + CH;
     if li == 0u {
         range = vec2<u32>(ranges[2u * tile], ranges[2u * tile + 1u]);
     }
@@ -234,6 +239,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
     var b = start_pixel(x, y + 1u, gain, &dexp);
     var c = start_pixel(x, y + 2u, gain, &dexp);
     var d = start_pixel(x, y + 3u, gain, &dexp);
+    var dl: array<vec4<f32>, CH_ARRAY>;
+    load_dl(a, x, y, &dl, 0u);
+    load_dl(b, x, y + 1u, &dl, 1u);
+    load_dl(c, x, y + 2u, &dl, 2u);
+    load_dl(d, x, y + 3u, &dl, 3u);
     lanes_init(li);
     // The walk starts at the highest bound among the lanes so that they stay in step
     // (lanes_*.wgsl); a pixel uses surfel k - 1 only below its own last contributor.
@@ -262,14 +272,21 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
         colour(&b, col);
         colour(&c, col);
         colour(&d, col);
-        for (var q = 0u; q < ch; q++) {
-            var g_l = 0.0;
+        // Σ_q l_q·dl_q of the four pixels, and each logit's gradient from them.
+        let w = vec4<f32>(weight(a), weight(b), weight(c), weight(d));
+        var l_dot = vec4<f32>(0.0);
+        for (var q = 0u; q < CH; q++) {
+            var l = 0.0;
             if any {
-                let l = logits[si * ch + q];
-                g_l = logit(&a, q, l) + logit(&b, q, l) + logit(&c, q, l) + logit(&d, q, l);
+                l = logits[si * CH + q];
             }
-            lanes_add(g0 + S_LOGITS + q, g_l);
+            l_dot += l * dl[q];
+            lanes_add(g0 + S_LOGITS + q, dot(w, dl[q]));
         }
+        a.l_dot = l_dot.x;
+        b.l_dot = l_dot.y;
+        c.l_dot = l_dot.z;
+        d.l_dot = l_dot.w;
         let g = plus(plus(geometry(&a, s), geometry(&b, s)), plus(geometry(&c, s), geometry(&d, s)));
         add3(g0 + S_RGB, g.rgb);
         lanes_add(g0 + S_OPACITY, g.op);

@@ -61,7 +61,7 @@ fn gpu_timestamps_attribute_time_to_each_kernel() {
     use rogs::render::gpu::GpuRasterizer;
     let c = ctx();
     let (p, cam) = rogs::render::check::test_scene(3);
-    let r = pollster::block_on(GpuRasterizer::new(&c)).expect("pipelines");
+    let r = pollster::block_on(GpuRasterizer::new(&c, p.channels as u32)).expect("pipelines");
     let gp = GpuRasterizer::upload(&c, &p);
     let cull = rogs::render::CullConfig::default();
     let mut timer = PassTimer::install(&c).expect("lavapipe has TIMESTAMP_QUERY");
@@ -112,7 +112,7 @@ fn bev_chunks_listing_their_own_surfels_render_the_same_map() {
         g.width,
         g.height
     );
-    let raster = pollster::block_on(GpuRasterizer::new(&c)).expect("rasteriser");
+    let raster = pollster::block_on(GpuRasterizer::new(&c, p.channels as u32)).expect("rasteriser");
     let gp = GpuRasterizer::upload(&c, &p);
     let bev = |per_chunk| {
         pollster::block_on(render(

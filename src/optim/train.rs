@@ -203,7 +203,7 @@ impl Trainer {
         cfg.lr.check().map_err(TrainError::Settings)?;
         check_fits(&ctx, p.len(), p.channels)?;
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let raster = GpuRasterizer::new(&ctx).await?;
+        let raster = GpuRasterizer::new(&ctx, p.channels as u32).await?;
         // The shaders' layout constants come from here, so host and kernel agree.
         let block = format!("const BLOCK: u32 = {MOMENT_BLOCK}u;");
         let adam_src = [block.as_str(), include_str!("../../shaders/adam.wgsl")];

@@ -73,7 +73,9 @@ pub async fn raster_view(
     let all = params(&p.grid, &p.surfels, origin);
     let sub = in_view(&all, &cam, &cull);
     let ch = all.channels;
-    let r = GpuRasterizer::new(ctx).await.map_err(|e| e.to_string())?;
+    let r = GpuRasterizer::new(ctx, ch as u32)
+        .await
+        .map_err(|e| e.to_string())?;
     let gp = GpuRasterizer::upload(ctx, &sub);
     let npx = (cam.width * cam.height) as usize;
     let grads = OutputGrads {

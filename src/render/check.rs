@@ -60,7 +60,7 @@ pub async fn compare(
     let (p, cam) = test_scene(ch);
     let cull = CullConfig::default();
     let oracle = render(&p, &cam, &cull);
-    let r = GpuRasterizer::with_strategy(ctx, strategy, subgroups).await?;
+    let r = GpuRasterizer::with_strategy(ctx, strategy, subgroups, ch as u32).await?;
     let gp = GpuRasterizer::upload(ctx, &p);
     let f = r.forward(ctx, &gp, &cam, &cull).await?;
     let img = GpuRasterizer::read_image(ctx, &f).await?;
@@ -132,7 +132,7 @@ pub async fn compare_forward_large(ctx: &GpuContext) -> Result<LargeForward, Gpu
     let p = road_patch(60, 150, 0.05, -1.5, 2.0, 2, 5).cast::<f32>();
     let cull = CullConfig::default();
     let oracle = render(&p, &cam, &cull);
-    let r = GpuRasterizer::new(ctx).await?;
+    let r = GpuRasterizer::new(ctx, p.channels as u32).await?;
     let gp = GpuRasterizer::upload(ctx, &p);
     let f = r.forward(ctx, &gp, &cam, &cull).await?;
     let img = GpuRasterizer::read_image(ctx, &f).await?;

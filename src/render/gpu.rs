@@ -41,6 +41,18 @@ pub struct GpuRasterizer {
     raster_bwd: wgpu::ComputePipeline,
     project_bwd: wgpu::ComputePipeline,
     sorter: RadixSorter,
+    /// Logit channels the compositing kernels were built for (`CH` in them).
+    channels: u32,
+}
+
+/// The channel count of the compositing kernels, prepended to their source: their
+/// per-pixel logit sums are arrays in registers, so the count is a constant of the
+/// pipeline (any count; `CH_ARRAY` keeps the array non-empty when there are none).
+fn channels_wgsl(channels: u32) -> String {
+    format!(
+        "const CH: u32 = {channels}u;\nconst CH_ARRAY: u32 = {}u;\n",
+        channels.max(1)
+    )
 }
 
 /// Surfel parameters on the GPU (structure of arrays).
@@ -109,9 +121,10 @@ fn view_bytes(
 }
 
 impl GpuRasterizer {
-    /// Pipelines using the adapter's preferred gradient accumulation.
-    pub async fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
-        Self::with_strategy(ctx, ctx.report.accumulation, ctx.report.subgroups).await
+    /// Pipelines for models with `channels` logit channels, using the adapter's
+    /// preferred gradient accumulation.
+    pub async fn new(ctx: &GpuContext, channels: u32) -> Result<Self, GpuError> {
+        Self::with_strategy(ctx, ctx.report.accumulation, ctx.report.subgroups, channels).await
     }
 
     /// Pipelines with an explicit accumulation strategy, reducing the backward pass's
@@ -121,7 +134,9 @@ impl GpuRasterizer {
         ctx: &GpuContext,
         strategy: AccumStrategy,
         subgroups: bool,
+        channels: u32,
     ) -> Result<Self, GpuError> {
+        let ch = channels_wgsl(channels);
         let lanes = if subgroups {
             include_str!("../../shaders/lanes_subgroup.wgsl")
         } else {
@@ -152,6 +167,7 @@ impl GpuRasterizer {
             raster: pipe(
                 "rasterize",
                 &[
+                    &ch,
                     VIEW_WGSL,
                     LOAD_SURFEL_WGSL,
                     include_str!("../../shaders/rasterize.wgsl"),
@@ -161,7 +177,9 @@ impl GpuRasterizer {
             raster_bwd: pipe(
                 "rasterize_backward",
                 &[
+                    // The `diagnostic` directive in `lanes` must come first.
                     lanes,
+                    &ch,
                     strategy.wgsl(),
                     VIEW_WGSL,
                     LOAD_SURFEL_WGSL,
@@ -179,6 +197,7 @@ impl GpuRasterizer {
                 "main",
             ),
             sorter: RadixSorter::new(ctx).await?,
+            channels,
         };
         if let Some(e) = scope.pop().await {
             return Err(GpuError::Validation(e.to_string()));
@@ -239,6 +258,12 @@ impl GpuRasterizer {
         mask: Option<&wgpu::Buffer>,
         capacity: Option<u32>,
     ) -> Result<GpuForward, GpuError> {
+        if p.channels != self.channels {
+            return Err(GpuError::Failed(format!(
+                "the model has {} logit channels, but the rasteriser was built for {}",
+                p.channels, self.channels
+            )));
+        }
         let cand = candidates(&p.xyz, cam, cull);
         let n = cand.len() as u32;
         let limit = ctx.limits.max_storage_buffer_binding_size;

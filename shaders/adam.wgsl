@@ -75,6 +75,8 @@ struct AdamParams {
 @group(0) @binding(5) var<storage, read_write> log_scale: array<f32>;
 @group(0) @binding(6) var<storage, read_write> opacity: array<f32>;
 @group(0) @binding(7) var<storage, read_write> rgb: array<f32>;
+// The logits of this pass's surfels (from surfel `first`, like the moments): the
+// model's largest per-surfel buffer need not fit one binding.
 @group(0) @binding(8) var<storage, read_write> logits: array<f32>;
 // (a, b) per camera, then (m_a, v_a, m_b, v_b) per camera.
 @group(0) @binding(9) var<storage, read_write> exposure: array<f32>;
@@ -133,8 +135,9 @@ fn update_surfel(i: u32) {
     for (var k = 0u; k < 3u; k++) {
         rgb[3u * i + k] = clamp(step_slot(i, 8u + k, rgb[3u * i + k], grad(8u + k), ap.lr_rgb), 0.0, 1.0);
     }
+    let li = ch * (i - ap.first);
     for (var q = 0u; q < ch; q++) {
-        logits[ch * i + q] = step_slot(i, 11u + q, logits[ch * i + q], grad(11u + q), ap.lr_logits);
+        logits[li + q] = step_slot(i, 11u + q, logits[li + q], grad(11u + q), ap.lr_logits);
     }
 }
 

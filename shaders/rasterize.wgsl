@@ -32,8 +32,8 @@
 @group(0) @binding(1) var<storage, read> proj: array<f32>;
 @group(0) @binding(2) var<storage, read> order: array<u32>;
 @group(0) @binding(3) var<storage, read> ranges: array<u32>;
-@group(0) @binding(4) var<storage, read> rgb: array<f32>;
-@group(0) @binding(5) var<storage, read> logits: array<f32>;
+// Per candidate slot: colour 3, then the logits (the view's copy, `gather.wgsl`).
+@group(0) @binding(4) var<storage, read> attrs: array<f32>;
 // Per pixel, PIX_STRIDE floats (browsers allow 10 storage buffers per stage, so the
 // per-pixel outputs share one): rgb 3, depth, alpha, final transmittance, last
 // contributor (u32 bits), colour before exposure 3.
@@ -41,8 +41,6 @@
 @group(0) @binding(7) var<storage, read_write> out_logits: array<f32>;
 // The packed training target (class in the top byte); read only when `view.masked`.
 @group(0) @binding(8) var<storage, read> target_px: array<u32>;
-// Pairs name candidate slots; the colours and logits are the surfel's, `cand[slot]`.
-@group(0) @binding(9) var<storage, read> cand: array<u32>;
 
 var<workgroup> range: vec2<u32>;
 
@@ -160,15 +158,15 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
         if !(weigh(&a, s, k) | weigh(&b, s, k) | weigh(&c, s, k) | weigh(&d, s, k)) {
             continue;
         }
-        let si = cand[id];
-        let col = vec3<f32>(rgb[3u * si], rgb[3u * si + 1u], rgb[3u * si + 2u]);
+        let o = (3u + CH) * id;
+        let col = vec3<f32>(attrs[o], attrs[o + 1u], attrs[o + 2u]);
         blend(&a, col, s.pc.z);
         blend(&b, col, s.pc.z);
         blend(&c, col, s.pc.z);
         blend(&d, col, s.pc.z);
         let w = vec4<f32>(weight(a), weight(b), weight(c), weight(d));
         for (var q = 0u; q < CH; q++) {
-            l[q] += logits[si * CH + q] * w;
+            l[q] += attrs[o + 3u + q] * w;
         }
     }
     let gain = exp(view.exposure_a);

@@ -32,15 +32,13 @@
 @group(0) @binding(2) var<storage, read> proj: array<f32>;
 @group(0) @binding(3) var<storage, read> order: array<u32>;
 @group(0) @binding(4) var<storage, read> ranges: array<u32>;
-@group(0) @binding(5) var<storage, read> rgb: array<f32>;
-@group(0) @binding(6) var<storage, read> logits: array<f32>;
+// Per candidate slot: colour 3, then the logits (the view's copy, `gather.wgsl`).
+@group(0) @binding(5) var<storage, read> attrs: array<f32>;
 // Forward outputs (PIX_STRIDE per pixel) and loss gradients (GRAD_STRIDE per pixel:
 // rgb 3, depth, alpha), packed to stay within 10 storage buffers per stage.
 @group(0) @binding(7) var<storage, read> px_out: array<f32>;
 @group(0) @binding(8) var<storage, read> g_px: array<f32>;
 @group(0) @binding(9) var<storage, read> g_logits: array<f32>;
-// Pairs and view gradients are per candidate slot; colours and logits per surfel.
-@group(0) @binding(10) var<storage, read> cand: array<u32>;
 
 const S_PC: u32 = 0u;
 const S_TU: u32 = 3u;
@@ -263,10 +261,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
         }
         // Lanes whose pixels do not use this surfel add zeros and keep their state.
         let g0 = stride * id;
-        let si = cand[id];
+        let o = (3u + CH) * id;
         var col = vec3<f32>(0.0);
         if any {
-            col = vec3<f32>(rgb[3u * si], rgb[3u * si + 1u], rgb[3u * si + 2u]);
+            col = vec3<f32>(attrs[o], attrs[o + 1u], attrs[o + 2u]);
         }
         colour(&a, col);
         colour(&b, col);
@@ -278,7 +276,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
         for (var q = 0u; q < CH; q++) {
             var l = 0.0;
             if any {
-                l = logits[si * CH + q];
+                l = attrs[o + 3u + q];
             }
             l_dot += l * dl[q];
             lanes_add(g0 + S_LOGITS + q, dot(w, dl[q]));

@@ -98,6 +98,16 @@ pub fn bind_ranges(
     })
 }
 
+/// `bytes` bytes of `buf` from byte `offset` (a multiple of the adapter's storage
+/// offset alignment), for a kernel that sees one window of a large buffer.
+pub fn window(buf: &wgpu::Buffer, offset: u64, bytes: u64) -> wgpu::BufferBinding<'_> {
+    wgpu::BufferBinding {
+        buffer: buf,
+        offset,
+        size: std::num::NonZeroU64::new(bytes),
+    }
+}
+
 /// Records one compute pass with one dispatch.
 pub fn dispatch(
     enc: &mut wgpu::CommandEncoder,

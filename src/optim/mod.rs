@@ -28,9 +28,9 @@ pub struct TrainConfig {
     pub holdout_every: Option<usize>,
     /// Stop after this many steps (benchmarks: time a part of an epoch).
     pub max_steps: Option<usize>,
-    /// At most this many blocks of 256 surfels' Adam moments per storage binding
-    /// (tests and benchmarks of the windowed Adam pass; `None`: as many as the
-    /// adapter binds).
+    /// At most this many blocks of 256 surfels' Adam moments and logits per storage
+    /// binding (tests and benchmarks of the windowed passes, `adam` and `gather`;
+    /// `None`: as many as the adapter binds).
     #[serde(skip)]
     pub moment_window: Option<usize>,
     /// A view's pair buffers hold the most pairs its camera's views have had × this,

@@ -21,7 +21,7 @@
 use super::adam::{learnable, StepConstants};
 use super::TrainConfig;
 use crate::gpu::buffers::{
-    bind, bind_ranges, bytes_of, dispatch, init_storage, pipeline, storage, uniform,
+    bind, bind_ranges, bytes_of, dispatch, init_storage, pipeline, storage, uniform, window,
 };
 use crate::gpu::readback::read_f32;
 use crate::gpu::{GpuContext, GpuError};
@@ -125,23 +125,28 @@ enum Try {
     Overflow,
 }
 
-/// The per-surfel buffers are bound whole, except the Adam moments, which are bound
-/// one window of blocks of surfels at a time; so the largest of them (the logits,
-/// 4·channels bytes per surfel, or the rotations, 16) must fit the adapter's storage
-/// binding, and the moments its largest buffer. The per-view buffers hold only
-/// the view's candidates (checked per view). A model that does not fit is refused
-/// with what to change.
-pub fn check_fits(ctx: &GpuContext, surfels: usize, channels: usize) -> Result<(), GpuError> {
+/// The per-surfel buffers are bound whole, except the Adam moments and the logits
+/// (4·channels bytes per surfel, the largest), which are bound one window of surfels
+/// at a time (here and in the rasteriser's `gather`); so the largest of the rest (the
+/// rotations and priors, 16 bytes per surfel, or the neighbour lists, `adj` words)
+/// must fit the adapter's storage binding, and the moments its largest buffer. The
+/// per-view buffers hold only the view's candidates (checked per view). A model that
+/// does not fit is refused with what to change.
+pub fn check_fits(
+    ctx: &GpuContext,
+    surfels: usize,
+    channels: usize,
+    adj: usize,
+) -> Result<(), GpuError> {
     let advice = "use a coarser grid (--resolution), a narrower corridor (--half-width), or split the drive into shorter bundles";
-    let per = (4 * channels as u64).max(16);
     let limit = ctx.limits.max_storage_buffer_binding_size;
-    let need = per * surfels as u64;
+    let need = (16 * surfels as u64).max(4 * adj as u64);
     if need > limit {
         return Err(GpuError::Validation(format!(
-            "{surfels} surfels need {} MiB in one GPU binding, but this adapter binds at most {} MiB ({} surfels with {channels} classes): {advice}",
+            "{surfels} surfels need {} MiB in one GPU binding, but this adapter binds at most {} MiB (about {} surfels): {advice}",
             need >> 20,
             limit >> 20,
-            limit / per
+            limit / 16
         )));
     }
     let moments = moment_bytes(surfels as u32, learnable(channels) as u32);
@@ -201,9 +206,13 @@ impl Trainer {
         total_steps: usize,
     ) -> Result<Self, TrainError> {
         cfg.lr.check().map_err(TrainError::Settings)?;
-        check_fits(&ctx, p.len(), p.channels)?;
+        check_fits(&ctx, p.len(), p.channels, reg.adj.len())?;
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let raster = GpuRasterizer::new(&ctx, p.channels as u32).await?;
+        let mut raster = GpuRasterizer::new(&ctx, p.channels as u32).await?;
+        // The rasteriser's logit windows follow the moments' (tests set both small).
+        raster.attr_window = cfg
+            .moment_window
+            .map(|b| (b as u32).saturating_mul(MOMENT_BLOCK));
         // The shaders' layout constants come from here, so host and kernel agree.
         let block = format!("const BLOCK: u32 = {MOMENT_BLOCK}u;");
         let adam_src = [block.as_str(), include_str!("../../shaders/adam.wgsl")];
@@ -482,10 +491,20 @@ impl Trainer {
         for &(first, end) in &self.windows {
             let (wg, row) = grid_1d(ctx, end - first);
             let u = uniform(ctx, "adam_params", bytes_of(&au((first, end), row)));
-            let window = wgpu::BufferBinding {
-                buffer: &self.moments,
-                offset: (first / MOMENT_BLOCK) as u64 * block_bytes(slots),
-                size: std::num::NonZeroU64::new(moment_bytes(end - first, slots)),
+            let moments = window(
+                &self.moments,
+                (first / MOMENT_BLOCK) as u64 * block_bytes(slots),
+                moment_bytes(end - first, slots),
+            );
+            // The same surfels' logits (a block of 256 starts at a multiple of 1 KiB).
+            // Without channels nothing reads them: bind the (padded) buffer.
+            let logits = match ch as u64 {
+                0 => p.logits.as_entire_buffer_binding(),
+                c => window(
+                    &p.logits,
+                    4 * c * first as u64,
+                    4 * c * (end - first) as u64,
+                ),
             };
             let bg = bind_ranges(
                 ctx,
@@ -493,13 +512,13 @@ impl Trainer {
                 &[
                     (0, u.as_entire_buffer_binding()),
                     (1, view_grad.as_entire_buffer_binding()),
-                    (2, window),
+                    (2, moments),
                     (3, p.pos.as_entire_buffer_binding()),
                     (4, p.rotation.as_entire_buffer_binding()),
                     (5, p.log_scale.as_entire_buffer_binding()),
                     (6, p.opacity.as_entire_buffer_binding()),
                     (7, p.rgb.as_entire_buffer_binding()),
-                    (8, p.logits.as_entire_buffer_binding()),
+                    (8, logits),
                     (10, self.status.as_entire_buffer_binding()),
                     (11, self.zreg.as_entire_buffer_binding()),
                 ],

@@ -50,17 +50,21 @@ fn rel_diff(a: &[f32], b: &[f32]) -> f32 {
 }
 
 /// GPU against the oracle with an accumulation `strategy`, reducing over subgroups
-/// first or not (`subgroups`).
+/// first or not (`subgroups`), gathering colours and logits in windows of at most
+/// `attr_window` surfels (`None`: one window, as for any model whose logits fit a
+/// binding).
 pub async fn compare(
     ctx: &GpuContext,
     strategy: AccumStrategy,
     subgroups: bool,
+    attr_window: Option<u32>,
 ) -> Result<Differences, GpuError> {
     let ch = 3;
     let (p, cam) = test_scene(ch);
     let cull = CullConfig::default();
     let oracle = render(&p, &cam, &cull);
-    let r = GpuRasterizer::with_strategy(ctx, strategy, subgroups, ch as u32).await?;
+    let mut r = GpuRasterizer::with_strategy(ctx, strategy, subgroups, ch as u32).await?;
+    r.attr_window = attr_window;
     let gp = GpuRasterizer::upload(ctx, &p);
     let f = r.forward(ctx, &gp, &cam, &cull).await?;
     let img = GpuRasterizer::read_image(ctx, &f).await?;

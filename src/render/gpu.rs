@@ -1,14 +1,17 @@
 //! Host glue of the rasteriser kernels: buffers, pipelines and the order of passes.
 //!
 //! Forward, per view: the host lists the view's candidate surfels (`candidates`) →
-//! `project` → `scan` (tile counts to offsets, total on the GPU) → `emit` (key,
+//! `project`, and `gather` (their colours and logits into the view's `attrs`, one
+//! window of the model's buffers per pass) → `scan` (tile counts to offsets, total on the GPU) → `emit` (key,
 //! candidate) pairs → radix sort → `tile_ranges` → `rasterize`.
 //! Backward: `rasterize_backward` (camera-space gradients, accumulated with the
 //! adapter's strategy) → `project_backward` (parameter gradients).
 //!
 //! Everything per view is indexed by candidate slot, not by surfel: projected
-//! surfels, tile counts, offsets, pair values and view gradients. `cand[slot]` is the
-//! surfel, read wherever a kernel needs the model's own parameters.
+//! surfels, tile counts, offsets, colours and logits, pair values and view gradients.
+//! `cand[slot]` is the surfel, read wherever a kernel needs the model's own parameters.
+//! Only `gather` and the optimiser touch the model's logits, each one window at a
+//! time, so a model's logits need not fit one storage binding.
 //!
 //! The pair buffers are sized from the pair count, read back once per view (4 bytes)
 //! after the scan; every other count stays on the GPU.
@@ -17,7 +20,9 @@ use super::candidates::candidates;
 use super::project::tile_bits;
 use super::rasterize_backward::{OutputGrads, VIEW_GRAD};
 use super::{CullConfig, Image, Params, ViewCamera, TILE};
-use crate::gpu::buffers::{bind, dispatch, init_storage, pipeline, storage, uniform};
+use crate::gpu::buffers::{
+    bind, bind_ranges, dispatch, init_storage, pipeline, storage, uniform, window,
+};
 use crate::gpu::radix_sort::{RadixSorter, SortPairs, SortedIn};
 use crate::gpu::readback::{read_bytes, read_f32};
 use crate::gpu::{AccumStrategy, GpuContext, GpuError};
@@ -36,6 +41,7 @@ pub struct GpuRasterizer {
     scan_sums: wgpu::ComputePipeline,
     add_offsets: wgpu::ComputePipeline,
     emit: wgpu::ComputePipeline,
+    gather: wgpu::ComputePipeline,
     ranges: wgpu::ComputePipeline,
     raster: wgpu::ComputePipeline,
     raster_bwd: wgpu::ComputePipeline,
@@ -43,6 +49,19 @@ pub struct GpuRasterizer {
     sorter: RadixSorter,
     /// Logit channels the compositing kernels were built for (`CH` in them).
     channels: u32,
+    /// At most this many surfels per `gather` window (tests of the windowed path;
+    /// `None`: as many as one storage binding holds).
+    pub attr_window: Option<u32>,
+}
+
+/// Surfels per `gather` window are a multiple of this: 64 surfels' colours (768
+/// bytes) and logits (256·channels bytes) start at offsets that every adapter's
+/// storage offset alignment (at most 256 bytes) divides.
+const ATTR_WINDOW_ALIGN: u32 = 64;
+
+/// Floats per candidate slot of the view's `attrs`: rgb 3, then the logits.
+pub fn attr_stride(channels: u32) -> u32 {
+    3 + channels
 }
 
 /// The channel count of the compositing kernels, prepended to their source: their
@@ -78,6 +97,8 @@ pub struct GpuForward {
     pub logits: wgpu::Buffer,
     /// Per candidate slot: the projected surfel.
     pub proj: wgpu::Buffer,
+    /// Per candidate slot: its surfel's colour and logits (`attr_stride` floats).
+    pub attrs: wgpu::Buffer,
     /// Tiles each candidate touches (0: not in this view).
     pub counts: wgpu::Buffer,
     /// The view's candidate surfels, increasing: slot → surfel.
@@ -154,6 +175,11 @@ impl GpuRasterizer {
             scan_blocks: pipe("scan_blocks", &[scan], "scan_blocks"),
             scan_sums: pipe("scan_sums", &[scan], "scan_sums"),
             add_offsets: pipe("add_offsets", &[scan], "add_offsets"),
+            gather: pipe(
+                "gather",
+                &[&ch, include_str!("../../shaders/gather.wgsl")],
+                "main",
+            ),
             emit: pipe(
                 "emit",
                 &[VIEW_WGSL, include_str!("../../shaders/emit.wgsl")],
@@ -198,6 +224,7 @@ impl GpuRasterizer {
             ),
             sorter: RadixSorter::new(ctx).await?,
             channels,
+            attr_window: None,
         };
         if let Some(e) = scope.pop().await {
             return Err(GpuError::Validation(e.to_string()));
@@ -313,6 +340,9 @@ impl GpuRasterizer {
             ],
         );
         dispatch(&mut enc, &self.project, &bg, (gx, gy, 1));
+        let stride = attr_stride(p.channels) as u64;
+        let attrs = storage(ctx, "attrs", 4 * stride * n as u64);
+        self.encode_gather(ctx, &mut enc, p, &cand, &cand_buf, &attrs);
         // Auto layouts hold only the bindings an entry point uses.
         if n > 0 {
             let bg = bind(
@@ -371,6 +401,7 @@ impl GpuRasterizer {
             px: storage(ctx, "px_out", 4 * PIX_STRIDE as u64 * npx),
             logits: storage(ctx, "out_logits", 4 * ch * npx),
             proj,
+            attrs,
             counts: counts.clone(),
             cand,
             cand_buf,
@@ -446,12 +477,10 @@ impl GpuRasterizer {
                 (1, &out.proj),
                 (2, order),
                 (3, &ranges),
-                (4, &p.rgb),
-                (5, &p.logits),
+                (4, &out.attrs),
                 (6, &out.px),
                 (7, &out.logits),
                 (8, mask.unwrap_or(&ranges)),
-                (9, &out.cand_buf),
             ],
         );
         dispatch(
@@ -465,6 +494,67 @@ impl GpuRasterizer {
             order: order.clone(),
             ..out
         })
+    }
+
+    /// The model's surfel windows [first, end) that one `gather` pass binds: as many
+    /// whole surfels as one storage binding holds (colours 12 bytes, logits
+    /// 4·channels), a multiple of `ATTR_WINDOW_ALIGN`, at most `attr_window`.
+    pub fn attr_windows(&self, ctx: &GpuContext, count: u32) -> Vec<(u32, u32)> {
+        let per = (4 * self.channels as u64).max(12);
+        let fit = (ctx.limits.max_storage_buffer_binding_size / per).min(u32::MAX as u64) as u32;
+        let cap = fit.min(self.attr_window.unwrap_or(u32::MAX));
+        let w = (cap / ATTR_WINDOW_ALIGN * ATTR_WINDOW_ALIGN).max(ATTR_WINDOW_ALIGN);
+        (0..count.div_ceil(w))
+            .map(|k| (k * w, (k.saturating_add(1).saturating_mul(w)).min(count)))
+            .collect()
+    }
+
+    /// Records the `gather` passes: the colours and logits of the candidates `cand`
+    /// (uploaded as `cand_buf`, increasing) into `attrs`, one model window per pass
+    /// over the run of slots whose surfels lie in it.
+    fn encode_gather(
+        &self,
+        ctx: &GpuContext,
+        enc: &mut wgpu::CommandEncoder,
+        p: &GpuParams,
+        cand: &[u32],
+        cand_buf: &wgpu::Buffer,
+        attrs: &wgpu::Buffer,
+    ) {
+        let ch = p.channels as u64;
+        for (b0, b1) in self.attr_windows(ctx, p.count) {
+            let s0 = cand.partition_point(|&c| c < b0);
+            let s1 = cand.partition_point(|&c| c < b1);
+            if s1 == s0 {
+                continue;
+            }
+            let count = (s1 - s0) as u32;
+            let (gx, gy) = ctx.dispatch_2d(count.div_ceil(256));
+            let u = uniform(
+                ctx,
+                "gather",
+                bytemuck::cast_slice(&[s0 as u32, count, b0, gx * 256]),
+            );
+            let (first, surfels) = (b0 as u64, (b1 - b0) as u64);
+            // Without channels nothing reads the logits: bind the (padded) buffer.
+            let logits = if ch == 0 {
+                p.logits.as_entire_buffer_binding()
+            } else {
+                window(&p.logits, 4 * ch * first, 4 * ch * surfels)
+            };
+            let bg = bind_ranges(
+                ctx,
+                &self.gather,
+                &[
+                    (0, u.as_entire_buffer_binding()),
+                    (1, cand_buf.as_entire_buffer_binding()),
+                    (2, window(&p.rgb, 12 * first, 12 * surfels)),
+                    (3, logits),
+                    (4, attrs.as_entire_buffer_binding()),
+                ],
+            );
+            dispatch(enc, &self.gather, &bg, (gx, gy, 1));
+        }
     }
 
     pub async fn read_image(ctx: &GpuContext, f: &GpuForward) -> Result<Image<f32>, GpuError> {
@@ -517,12 +607,10 @@ impl GpuRasterizer {
                 (2, &f.proj),
                 (3, &f.order),
                 (4, &f.ranges),
-                (5, &p.rgb),
-                (6, &p.logits),
+                (5, &f.attrs),
                 (7, &f.px),
                 (8, g_px),
                 (9, g_logits),
-                (10, &f.cand_buf),
             ],
         );
         dispatch(
@@ -589,10 +677,11 @@ impl GpuRasterizer {
 }
 
 /// GPU bytes a view holds per candidate while it is rendered and differentiated:
-/// projected surfel 24 floats, tile count, offset, the candidate itself, view
-/// gradients 18 + channels (pairs and pixels come on top, per tile and pixel).
+/// projected surfel 24 floats, tile count, offset, the candidate itself, colour and
+/// logits 3 + channels, view gradients 18 + channels (pairs and pixels come on top,
+/// per tile and pixel).
 pub fn view_bytes_per_candidate(channels: u32) -> u64 {
-    4 * (24 + 3 + VIEW_GRAD as u64 + channels as u64)
+    4 * (24 + 3 + attr_stride(channels) as u64 + VIEW_GRAD as u64 + channels as u64)
 }
 
 /// Floats of the view-gradient buffer `encode_backward` needs for forward pass `f`.

@@ -116,3 +116,31 @@ fn a_surfel_the_candidate_list_missed_is_found_and_listed_next_time() {
         "the host now knows where the surfel is"
     );
 }
+
+/// What a model must fit: 16 bytes per surfel (rotations, priors) in one storage
+/// binding. The logits (4 bytes per class) are bound in windows, so a model whose
+/// logits alone exceed the binding is accepted, and one past the 16-byte bound is
+/// refused with advice that names the way out.
+#[test]
+fn models_whose_logits_exceed_one_binding_fit_and_larger_ones_are_refused() {
+    use rogs::optim::train::check_fits;
+    let ctx =
+        GpuContext::new_blocking().unwrap_or_else(|e| panic!("GPU tests need an adapter: {e}"));
+    let limit = ctx.limits.max_storage_buffer_binding_size;
+    let classes = 9;
+    let logits_over = (limit / (4 * classes as u64) + 1) as usize;
+    let over = (limit / 16 + 1) as usize;
+    assert!(
+        check_fits(&ctx, logits_over, classes, 4 * logits_over).is_ok(),
+        "{logits_over} surfels' logits exceed the binding, but they are windowed"
+    );
+    let e = check_fits(&ctx, over, classes, 4 * over).expect_err("over 16 bytes per surfel");
+    let msg = e.to_string();
+    assert!(
+        msg.contains("one GPU binding") && msg.contains("--resolution"),
+        "{msg}"
+    );
+    // Neighbour lists count too: 4 bytes per entry.
+    let adj = (limit / 4 + 1) as usize;
+    assert!(check_fits(&ctx, 1000, classes, adj).is_err());
+}

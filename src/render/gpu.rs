@@ -2,8 +2,9 @@
 //!
 //! Forward, per view: the host lists the view's candidate surfels (`candidates`) →
 //! `project`, and `gather` (their colours and logits into the view's `attrs`, one
-//! window of the model's buffers per pass) → `scan` (tile counts to offsets, total on the GPU) → `emit` (key,
-//! candidate) pairs → radix sort → `tile_ranges` → `rasterize`.
+//! window of the model's buffers per pass) → `scan` (tile counts to offsets, total on
+//! the GPU) → `emit` (key, candidate) pairs → radix sort → `tile_ranges` →
+//! `rasterize`.
 //! Backward: `rasterize_backward` (camera-space gradients, accumulated with the
 //! adapter's strategy) → `project_backward` (parameter gradients).
 //!

@@ -496,16 +496,6 @@ impl Trainer {
                 (first / MOMENT_BLOCK) as u64 * block_bytes(slots),
                 moment_bytes(end - first, slots),
             );
-            // The same surfels' logits (a block of 256 starts at a multiple of 1 KiB).
-            // Without channels nothing reads them: bind the (padded) buffer.
-            let logits = match ch as u64 {
-                0 => p.logits.as_entire_buffer_binding(),
-                c => window(
-                    &p.logits,
-                    4 * c * first as u64,
-                    4 * c * (end - first) as u64,
-                ),
-            };
             let bg = bind_ranges(
                 ctx,
                 k,
@@ -518,7 +508,8 @@ impl Trainer {
                     (5, p.log_scale.as_entire_buffer_binding()),
                     (6, p.opacity.as_entire_buffer_binding()),
                     (7, p.rgb.as_entire_buffer_binding()),
-                    (8, logits),
+                    // The same surfels' logits (a block of 256 starts at a multiple of 1 KiB).
+                    (8, p.logits_window(first, end)),
                     (10, self.status.as_entire_buffer_binding()),
                     (11, self.zreg.as_entire_buffer_binding()),
                 ],

@@ -90,6 +90,23 @@ pub struct GpuParams {
     pub xyz: Vec<[f32; 3]>,
 }
 
+impl GpuParams {
+    /// The logits of surfels [first, end), for a kernel that binds one window of the
+    /// model (`gather`, `adam`). Without channels nothing reads them, and the
+    /// (padded) buffer is bound whole: an empty binding is invalid.
+    pub fn logits_window(&self, first: u32, end: u32) -> wgpu::BufferBinding<'_> {
+        let ch = self.channels as u64;
+        if ch == 0 {
+            return self.logits.as_entire_buffer_binding();
+        }
+        window(
+            &self.logits,
+            4 * ch * first as u64,
+            4 * ch * (end - first) as u64,
+        )
+    }
+}
+
 /// Forward state kept for the backward pass.
 pub struct GpuForward {
     /// Per pixel `PIX_STRIDE` floats: rgb 3, depth, alpha, final transmittance, last
@@ -522,7 +539,6 @@ impl GpuRasterizer {
         cand_buf: &wgpu::Buffer,
         attrs: &wgpu::Buffer,
     ) {
-        let ch = p.channels as u64;
         for (b0, b1) in self.attr_windows(ctx, p.count) {
             let s0 = cand.partition_point(|&c| c < b0);
             let s1 = cand.partition_point(|&c| c < b1);
@@ -537,12 +553,6 @@ impl GpuRasterizer {
                 bytemuck::cast_slice(&[s0 as u32, count, b0, gx * 256]),
             );
             let (first, surfels) = (b0 as u64, (b1 - b0) as u64);
-            // Without channels nothing reads the logits: bind the (padded) buffer.
-            let logits = if ch == 0 {
-                p.logits.as_entire_buffer_binding()
-            } else {
-                window(&p.logits, 4 * ch * first, 4 * ch * surfels)
-            };
             let bg = bind_ranges(
                 ctx,
                 &self.gather,
@@ -550,7 +560,7 @@ impl GpuRasterizer {
                     (0, u.as_entire_buffer_binding()),
                     (1, cand_buf.as_entire_buffer_binding()),
                     (2, window(&p.rgb, 12 * first, 12 * surfels)),
-                    (3, logits),
+                    (3, p.logits_window(b0, b1)),
                     (4, attrs.as_entire_buffer_binding()),
                 ],
             );

@@ -14,12 +14,14 @@ pub mod grid;
 pub mod import;
 pub mod init;
 pub mod loss;
+pub mod mem;
 pub mod optim;
 pub mod par;
 pub mod reconstruct;
 pub mod render;
 pub mod spatial;
 pub mod synth;
+pub mod tiles;
 
 #[cfg(not(target_arch = "wasm32"))]
 pub mod cli;

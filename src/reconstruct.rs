@@ -9,7 +9,7 @@ use crate::bundle::{Bundle, ClassRole, Problem};
 use crate::eval::{BevRaster, Metrics};
 use crate::gpu::{GpuContext, GpuError};
 use crate::init::align::{align_bundle, AlignConfig, AlignSummary};
-use crate::init::prepare::{lidar_world, prepare, PrepareConfig, PrepareError, PrepareReport};
+use crate::init::prepare::{lidar_world_of, prepare, PrepareConfig, PrepareError, PrepareReport};
 use crate::init::{PoseIndex, PosePlanes};
 use crate::loss::regularise::RegData;
 use crate::loss::targets;
@@ -18,6 +18,7 @@ use crate::optim::{epoch_order, is_holdout, scene_extent, split_views, TrainConf
 use crate::render::from_bundle::{local_origin, params, view_camera};
 use crate::render::gpu::GpuRasterizer;
 use crate::render::Params;
+use crate::tiles::Tile;
 use serde::Serialize;
 use thiserror::Error;
 use web_time::Instant;
@@ -40,6 +41,35 @@ pub enum ReconstructError {
         "the bundle has no training views (every frame is held out or no view names a camera)"
     )]
     NoViews,
+    /// A tile with no surfels or no view that sees them (skipped by the tiled run).
+    #[error("the tile has no surfels or no training view sees them")]
+    EmptyTile,
+    #[error("tile {tile}: {source}")]
+    Tile {
+        tile: String,
+        #[source]
+        source: Box<ReconstructError>,
+    },
+}
+
+/// Corrects the bundle's poses from its LiDAR when `cfg` asks for it (once per run,
+/// before anything reads the poses).
+pub fn align(
+    b: &mut Bundle,
+    cfg: &ReconstructConfig,
+) -> Result<Option<AlignSummary>, ReconstructError> {
+    Ok(match &cfg.align {
+        Some(a) if cfg.train.use_lidar && cfg.prepare.use_lidar => {
+            align_bundle(b, a)?.map(|a| AlignSummary::new(&a))
+        }
+        _ => None,
+    })
+}
+
+/// World xy of frame `f`'s vehicle.
+pub fn frame_xy(m: &crate::bundle::Manifest, f: usize) -> [f64; 2] {
+    let t = &m.frames[f].vehicle_to_world;
+    [t[0][3], t[1][3]]
 }
 
 #[derive(Clone, Debug)]
@@ -128,7 +158,6 @@ pub fn road_channels(b: &Bundle) -> Vec<(usize, u8)> {
 }
 
 impl Session {
-    /// Prepares the surfels, initialises colours and uploads everything to the GPU.
     /// Prepares a run on `b`. With `cfg.align` and LiDAR in use, the bundle's poses
     /// are first corrected in place, so every later stage (and the caller) sees them.
     pub async fn new(
@@ -136,19 +165,38 @@ impl Session {
         cfg: ReconstructConfig,
         ctx: GpuContext,
     ) -> Result<Self, ReconstructError> {
-        let mut timings = Timings::default();
         let t = Instant::now();
-        let alignment = match &cfg.align {
-            Some(a) if cfg.train.use_lidar && cfg.prepare.use_lidar => {
-                align_bundle(b, a)?.map(|a| AlignSummary::new(&a))
-            }
-            _ => None,
-        };
-        timings.align_ms = t.elapsed().as_secs_f64() * 1e3;
-        let b: &Bundle = b;
+        let alignment = align(b, &cfg)?;
+        let align_ms = t.elapsed().as_secs_f64() * 1e3;
+        let mut s = Self::build(b, cfg, ctx, None).await?;
+        s.alignment = alignment;
+        s.timings.align_ms = align_ms;
+        Ok(s)
+    }
+
+    /// Prepares the surfels, initialises colours and uploads everything to the GPU,
+    /// for the whole map (`tile` = `None`) or for one tile: its surfels (the corridor
+    /// clipped to the tile's rectangle), the views that see them, the LiDAR sweeps
+    /// near it. The poses are used as they are (`align` runs once, before).
+    pub async fn build(
+        b: &Bundle,
+        cfg: ReconstructConfig,
+        ctx: GpuContext,
+        tile: Option<&Tile>,
+    ) -> Result<Self, ReconstructError> {
+        let mut timings = Timings::default();
         let m = &b.manifest;
         let t = Instant::now();
-        let prepared = prepare(b, &cfg.prepare)?;
+        let mut pcfg = cfg.prepare.clone();
+        if let Some(tile) = tile {
+            pcfg.clip = Some(tile.rect);
+            pcfg.frames = Some(tile.near_frames.clone());
+        }
+        let near = |f: usize| tile.is_none_or(|t| t.near_frames.get(f).copied().unwrap_or(false));
+        let prepared = prepare(b, &pcfg)?;
+        if prepared.grid.is_empty() {
+            return Err(ReconstructError::EmptyTile);
+        }
         timings.prepare_ms = t.elapsed().as_secs_f64() * 1e3;
         let t = Instant::now();
         let planes = PosePlanes::from_manifest(m);
@@ -156,7 +204,7 @@ impl Session {
         let holdout = cfg.train.holdout_every;
         let mut s = prepared.surfels;
         let colours = crate::init::ipm::surfel_colours(b, &prepared.grid, &s.z, &poses, &|f| {
-            !is_holdout(f, holdout)
+            !is_holdout(f, holdout) && near(f)
         })?;
         let chan = targets::channel_of(m);
         for (k, c) in colours.iter().enumerate() {
@@ -178,7 +226,7 @@ impl Session {
         let origin = local_origin(&prepared.grid, &s);
         let initial = params(&prepared.grid, &s, origin);
         let lidar = if cfg.train.use_lidar && cfg.train.loss.lidar > 0.0 {
-            lidar_world(b)?.0
+            lidar_world_of(b, pcfg.frames.as_deref())?.0
         } else {
             Vec::new()
         };
@@ -190,9 +238,20 @@ impl Session {
             origin[2],
             &cfg.train.loss,
         );
-        let (train_views, holdout_views) = split_views(m, holdout);
+        let (mut train_views, mut holdout_views) = split_views(m, holdout);
+        let mut extent = scene_extent(m);
+        if let Some(tile) = tile {
+            train_views.retain(|v| tile.views.contains(&(v.frame, v.view)));
+            // A held-out view is scored in the tile whose core holds its vehicle.
+            holdout_views.retain(|v| tile.core.contains(frame_xy(m, v.frame)));
+            extent = tile.extent;
+        }
         if train_views.is_empty() {
-            return Err(ReconstructError::NoViews);
+            return Err(if tile.is_some() {
+                ReconstructError::EmptyTile
+            } else {
+                ReconstructError::NoViews
+            });
         }
         let epochs = if cfg.baseline_ipm {
             0
@@ -209,7 +268,7 @@ impl Session {
             &reg,
             m.cameras.len(),
             &cfg.train,
-            scene_extent(m),
+            extent,
             order.len(),
         )
         .await?;
@@ -218,7 +277,7 @@ impl Session {
             bytes_per_surfel_gpu: trainer.bytes_per_surfel(),
             with_lidar: reg.with_lidar,
             edges: reg.edges,
-            alignment,
+            alignment: None,
             prepare_report: prepared.report,
             level: prepared.grid.level.clone(),
             grid: prepared.grid,
@@ -368,14 +427,25 @@ impl Session {
     /// Road-pixel PSNR of the held-out views for the current model and for the IPM
     /// baseline model, over pixels inside the loss mask that both cover.
     pub async fn holdout(&self, b: &Bundle) -> Result<Option<Holdout>, ReconstructError> {
+        let mut sums = HoldoutSums::default();
+        self.holdout_sums(b, &mut sums).await?;
+        Ok(sums.holdout(self.holdout_views.len()))
+    }
+
+    /// Adds the held-out views' squared errors (model and IPM baseline) to `sums`.
+    pub async fn holdout_sums(
+        &self,
+        b: &Bundle,
+        sums: &mut HoldoutSums,
+    ) -> Result<(), ReconstructError> {
         if self.holdout_views.is_empty() {
-            return Ok(None);
+            return Ok(());
         }
         let t = &self.trainer;
         let exposures = t.read_exposures().await?;
         let ipm = GpuRasterizer::upload(&t.ctx, &self.initial);
         let (mut se, mut se_ipm, mut n) = (0.0f64, 0.0f64, 0u64);
-        let mut frames = std::collections::BTreeSet::new();
+        let mut frames = Vec::new();
         for v in &self.holdout_views {
             let (target, _) = self.target(b, v)?;
             let e = exposures.get(v.camera).copied().unwrap_or([0.0, 0.0]);
@@ -404,18 +474,37 @@ impl Session {
                 }
                 n += 3;
             }
-            frames.insert(v.frame);
+            frames.push(v.frame);
         }
-        if n == 0 {
-            return Ok(None);
+        sums.se += se;
+        sums.se_ipm += se_ipm;
+        sums.n += n;
+        sums.frames.extend(frames);
+        Ok(())
+    }
+}
+
+/// Squared errors of held-out views summed over one or more sessions (tiles).
+#[derive(Clone, Debug, Default)]
+pub struct HoldoutSums {
+    pub se: f64,
+    pub se_ipm: f64,
+    pub n: u64,
+    pub frames: std::collections::BTreeSet<usize>,
+}
+
+impl HoldoutSums {
+    pub fn holdout(&self, views: usize) -> Option<Holdout> {
+        if self.n == 0 {
+            return None;
         }
-        let psnr = |se: f64| -10.0 * (se / n as f64).max(1e-12).log10();
-        Ok(Some(Holdout {
-            psnr_db: psnr(se),
-            ipm_psnr_db: psnr(se_ipm),
-            frames: frames.len(),
-            views: self.holdout_views.len(),
-        }))
+        let psnr = |se: f64| -10.0 * (se / self.n as f64).max(1e-12).log10();
+        Some(Holdout {
+            psnr_db: psnr(self.se),
+            ipm_psnr_db: psnr(self.se_ipm),
+            frames: self.frames.len(),
+            views,
+        })
     }
 }
 
@@ -450,10 +539,31 @@ impl Session {
         let t = Instant::now();
         let truth = BevRaster::from_bundle(b)?;
         let g = self.geometry(truth.as_ref());
-        let bev = self.render_bev(&p, &g, progress).await?;
-        let min_alpha = self.cfg.train.loss.min_alpha;
-        let raster = bev::to_raster(&bev, &g, &road_channels(b), min_alpha);
-        let scalars = self.render_scalars(&p, &g).await?;
+        let layers = self.layers(&p, &g, progress).await?;
+        self.timings.bev_ms = t.elapsed().as_secs_f64() * 1e3;
+        let t = Instant::now();
+        let centres = self.centres(&p);
+        let holdout = self.holdout(b).await?;
+        let o = Outcome::assemble(b, p, g, layers, truth, &centres, holdout, self.min_alpha())?;
+        self.timings.eval_ms = t.elapsed().as_secs_f64() * 1e3;
+        Ok(o)
+    }
+
+    pub fn min_alpha(&self) -> f32 {
+        self.cfg.train.loss.min_alpha
+    }
+
+    /// The BEV layers of the model `p` over `g`: colour, logits, elevation and
+    /// alpha, and the confidence and density layers (NaN where nothing is rendered).
+    pub async fn layers(
+        &self,
+        p: &Params<f32>,
+        g: &BevGeometry,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<Layers, GpuError> {
+        let bev = self.render_bev(p, g, progress).await?;
+        let min_alpha = self.min_alpha();
+        let scalars = self.render_scalars(p, g).await?;
         let layer = |c: usize| -> Vec<f32> {
             (0..bev.alpha.len())
                 .map(|i| {
@@ -466,19 +576,45 @@ impl Session {
                 .collect()
         };
         let (confidence, density) = (layer(0), layer(1));
-        self.timings.bev_ms = t.elapsed().as_secs_f64() * 1e3;
-        let t = Instant::now();
-        let metrics =
-            crate::eval::score(b, truth.as_ref(), &raster, &self.centres(&p), g.resolution)?;
-        let holdout = self.holdout(b).await?;
-        self.timings.eval_ms = t.elapsed().as_secs_f64() * 1e3;
-        Ok(Outcome {
-            params: p,
-            geometry: g,
+        Ok(Layers {
             bev,
-            raster,
             confidence,
             density,
+        })
+    }
+}
+
+/// The rendered layers of a model over one geometry (a tile's or the map's).
+#[derive(Clone, Debug, Default)]
+pub struct Layers {
+    pub bev: BevImage,
+    pub confidence: Vec<f32>,
+    pub density: Vec<f32>,
+}
+
+impl Outcome {
+    /// The outcome of layers over the map's geometry `g`: the raster and the metrics
+    /// (`centres`: the surfel centres some view saw, world).
+    #[allow(clippy::too_many_arguments)]
+    pub fn assemble(
+        b: &Bundle,
+        params: Params<f32>,
+        g: BevGeometry,
+        layers: Layers,
+        truth: Option<BevRaster>,
+        centres: &[[f64; 3]],
+        holdout: Option<Holdout>,
+        min_alpha: f32,
+    ) -> Result<Self, ReconstructError> {
+        let raster = bev::to_raster(&layers.bev, &g, &road_channels(b), min_alpha);
+        let metrics = crate::eval::score(b, truth.as_ref(), &raster, centres, g.resolution)?;
+        Ok(Outcome {
+            params,
+            geometry: g,
+            bev: layers.bev,
+            raster,
+            confidence: layers.confidence,
+            density: layers.density,
             truth,
             metrics,
             holdout,

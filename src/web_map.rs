@@ -4,9 +4,9 @@
 
 use crate::bev::BevGeometry;
 use crate::bundle::{Bundle, Limits};
-use crate::eval::BevRaster;
 use crate::gpu::GpuContext;
-use crate::reconstruct::{report, Outcome, ReconstructConfig, Session};
+use crate::reconstruct::{Outcome, ReconstructConfig, Session};
+use crate::tiles::{TileConfig, TiledRun, DEFAULT_OVERLAP_M};
 use serde::Deserialize;
 use wasm_bindgen::prelude::*;
 
@@ -25,12 +25,15 @@ struct Settings {
     align: Option<bool>,
     adaptive: Option<bool>,
     init: Option<String>,
+    /// Tile side in metres (none: untiled unless the drive is large).
+    tile_m: Option<f64>,
+    tile_overlap_m: Option<f64>,
 }
 
 #[wasm_bindgen]
 pub struct Reconstruction {
     bundle: Bundle,
-    session: Session,
+    run: TiledRun,
     /// The map's geometry, known from the start so that previews line up with it.
     geometry: BevGeometry,
     outcome: Option<Outcome>,
@@ -64,13 +67,30 @@ pub async fn start_reconstruction(
     if s.init.as_deref() == Some("nearest") {
         c.prepare.init.method = crate::init::InitMethod::Nearest;
     }
+    let asked = match s.tile_m {
+        Some(size_m) if size_m.is_finite() && size_m > 0.0 => Some(TileConfig {
+            size_m,
+            overlap_m: s
+                .tile_overlap_m
+                .filter(|o| o.is_finite() && *o >= 0.0)
+                .unwrap_or(DEFAULT_OVERLAP_M),
+        }),
+        Some(v) => {
+            return Err(err(format!(
+                "tile size {v} m: expected a positive number of metres, such as 64"
+            )))
+        }
+        None => None,
+    };
+    let tiling = crate::tiles::choose(&bundle.manifest, &c, asked);
     let ctx = GpuContext::new().await.map_err(err)?;
-    let session = Session::new(&mut bundle, c, ctx).await.map_err(err)?;
-    let truth = BevRaster::from_bundle(&bundle).map_err(err)?;
-    let geometry = session.geometry(truth.as_ref());
+    let run = TiledRun::new(&mut bundle, c, tiling, ctx)
+        .await
+        .map_err(err)?;
+    let geometry = run.geometry;
     Ok(Reconstruction {
         bundle,
-        session,
+        run,
         geometry,
         outcome: None,
         files: Vec::new(),
@@ -80,36 +100,46 @@ pub async fn start_reconstruction(
 #[wasm_bindgen]
 impl Reconstruction {
     pub fn total_steps(&self) -> usize {
-        self.session.total_steps()
+        self.run.total_steps()
     }
 
     pub fn steps_done(&self) -> usize {
-        self.session.steps_done()
+        self.run.steps_done()
     }
 
+    /// Surfels of the tiles started so far (all of them when untiled).
     pub fn surfels(&self) -> usize {
-        self.session.prepare_report.surfels
+        self.run.surfels()
+    }
+
+    /// Tiles in the plan (1 when untiled).
+    pub fn tiles(&self) -> usize {
+        self.run.tile_count()
+    }
+
+    /// Index of the tile being trained (0 when untiled).
+    pub fn tile(&self) -> usize {
+        self.run.current_tile().map_or(0, |t| t.0)
     }
 
     /// One step; resolves to the total loss, or `undefined` when all steps are done.
     pub async fn step(&mut self) -> Result<Option<f64>, JsValue> {
-        let l = self.session.step(&self.bundle).await.map_err(err)?;
+        let l = self.run.step(&self.bundle).await.map_err(err)?;
         Ok(l.map(|l| l.total()))
     }
 
     /// Renders the layers, scores them and prepares the export files; resolves to the
     /// report (as JSON text).
     pub async fn finish(&mut self) -> Result<String, JsValue> {
-        let p = self.session.model().await.map_err(err)?;
-        // Kept for export even if the BEV below fails.
-        self.files = crate::export::model_files(&p, self.session.origin);
-        let o = self
-            .session
-            .finish(&self.bundle, p, &mut |_, _| {})
-            .await
-            .map_err(err)?;
+        let o = self.run.finish(&self.bundle, &mut |_, _| {}).await;
+        // Kept for export even if the BEV failed.
+        let (p, origin) = self.run.model();
+        self.files = crate::export::model_files(p, origin);
+        let o = o.map_err(err)?;
         let mut files = crate::export::files(&o, &self.bundle.manifest);
-        let r = report(&self.session, &o, &self.bundle.manifest.name);
+        let r = self
+            .run
+            .report(&self.bundle, &o, &self.bundle.manifest.name);
         let text = serde_json::to_string_pretty(&r).map_err(err)?;
         files.push(("report.json".into(), text.clone().into_bytes()));
         self.files.extend(files);
@@ -133,7 +163,7 @@ impl Reconstruction {
 
     /// RGBA of the current model's BEV colour (throttle: it renders the whole map).
     pub async fn preview(&self) -> Result<Vec<u8>, JsValue> {
-        self.session.preview(&self.geometry).await.map_err(err)
+        self.run.preview().await.map_err(err)
     }
 
     /// Vehicle positions as map pixel coordinates, x and y interleaved.
@@ -148,8 +178,13 @@ impl Reconstruction {
 
     /// `{width, height, rendered, input}` (RGBA) for view `view` of frame `frame`.
     pub async fn camera_view(&self, frame: usize, view: usize) -> Result<JsValue, JsValue> {
-        let r = self
+        // The last tile's session: untiled, the whole model.
+        let s = self
+            .run
             .session
+            .as_ref()
+            .ok_or_else(|| err("no trained tile to render from"))?;
+        let r = s
             .camera_view(&self.bundle, frame, view)
             .await
             .map_err(err)?

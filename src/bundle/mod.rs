@@ -7,6 +7,7 @@
 mod error;
 pub mod example;
 mod manifest;
+mod merge;
 mod source;
 mod summary;
 pub mod transform;
@@ -15,6 +16,7 @@ mod write;
 
 pub use error::{BundleErrors, Problem};
 pub use manifest::*;
+pub use merge::DRIVE_GAP_M;
 pub use source::{is_safe_path, Limits, Source, ZipSource};
 pub use summary::Summary;
 pub use validate::{check_rigid, decode_label, decode_rgb, image_dims, ROTATION_TOLERANCE};
@@ -50,7 +52,17 @@ pub fn parse_manifest(text: &[u8]) -> Result<Manifest, Problem> {
 pub struct Bundle {
     pub manifest: Manifest,
     pub limits: Limits,
+    /// The drives whose frames the manifest holds, in order (one for a bundle as
+    /// read; several after `Bundle::merge`).
+    pub drives: Vec<Drive>,
     source: Box<dyn Source>,
+}
+
+/// One drive of a (possibly merged) bundle: its name and its run of frames.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Drive {
+    pub name: String,
+    pub frames: std::ops::Range<usize>,
 }
 
 impl Bundle {
@@ -105,9 +117,14 @@ impl Bundle {
         if !problems.is_empty() {
             return Err(BundleErrors(problems));
         }
+        let drives = vec![Drive {
+            name: manifest.name.clone(),
+            frames: 0..manifest.frames.len(),
+        }];
         Ok(Self {
             manifest,
             limits,
+            drives,
             source,
         })
     }
@@ -142,6 +159,14 @@ impl Bundle {
                 [f(0), f(1), f(2)]
             })
             .collect())
+    }
+
+    /// The index of the drive that frame `frame` belongs to.
+    pub fn drive_of(&self, frame: usize) -> usize {
+        self.drives
+            .iter()
+            .position(|d| d.frames.contains(&frame))
+            .unwrap_or(0)
     }
 
     pub fn summary(&self) -> Summary {

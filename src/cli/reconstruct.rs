@@ -1,12 +1,15 @@
-//! `rogs reconstruct BUNDLE --out DIR`: the whole job headless, with progress and ETA
-//! on stderr, the map layers, the surfel PLY and report.json in DIR.
+//! `rogs reconstruct BUNDLE… --out DIR`: the whole job headless, with progress and
+//! ETA on stderr, the map layers, the surfel PLY and report.json in DIR. Several
+//! bundles (drives of the same place, one world frame) make one map; large drives
+//! are trained tile by tile (`--tile-m`).
 
 use super::progress::Progress;
 use super::EXIT_INVALID_INPUT;
 use crate::bundle::{Bundle, Limits};
 use crate::gpu::GpuContext;
 use crate::init::InitMethod;
-use crate::reconstruct::{ReconstructConfig, Session};
+use crate::reconstruct::ReconstructConfig;
+use crate::tiles::{TileConfig, TiledRun, DEFAULT_OVERLAP_M};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -26,8 +29,10 @@ enum Baseline {
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// The scene bundle (.zip or folder).
-    bundle: PathBuf,
+    /// The scene bundle (.zip or folder); several bundles (drives of the same
+    /// streets in one world frame) are merged into one map.
+    #[arg(required = true, num_args = 1..)]
+    bundles: Vec<PathBuf>,
     /// Output folder (created if missing; files in it are overwritten).
     #[arg(long)]
     out: PathBuf,
@@ -88,6 +93,15 @@ pub struct Args {
     /// Seed of the training image order.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Train the map in square tiles of this side (metres, world-aligned), one
+    /// after the other, so the GPU holds one tile at a time. Default: untiled, unless
+    /// the corridor would hold over 4 M surfels, then 96 m tiles.
+    #[arg(long, value_parser = positive_m64)]
+    tile_m: Option<f64>,
+    /// Each tile also trains this far beyond its square (metres); neighbouring
+    /// tiles' layers are blended over twice this width.
+    #[arg(long, default_value_t = DEFAULT_OVERLAP_M, value_parser = non_negative_m64)]
+    tile_overlap_m: f64,
 }
 
 fn config(a: &Args) -> ReconstructConfig {
@@ -128,37 +142,71 @@ fn config(a: &Args) -> ReconstructConfig {
 }
 
 pub fn run(a: Args) -> Result<ExitCode, String> {
-    let mut bar = Progress::new("open");
-    let mut b = match Bundle::open(&a.bundle, Limits::default(), &mut |d, t| bar.update(d, t)) {
+    let mut bundles = Vec::new();
+    for path in &a.bundles {
+        let mut bar = Progress::new("open");
+        match Bundle::open(path, Limits::default(), &mut |d, t| bar.update(d, t)) {
+            Ok(b) => bundles.push(b),
+            Err(e) => {
+                bar.finish();
+                eprintln!("{}: invalid bundle: {e}", path.display());
+                return Ok(ExitCode::from(EXIT_INVALID_INPUT));
+            }
+        }
+        bar.finish();
+    }
+    let names: Vec<String> = a.bundles.iter().map(|p| p.display().to_string()).collect();
+    let mut b = match Bundle::merge(bundles, &names) {
         Ok(b) => b,
         Err(e) => {
-            bar.finish();
-            eprintln!("{}: invalid bundle: {e}", a.bundle.display());
+            eprintln!("cannot merge the drives into one map: {e}");
             return Ok(ExitCode::from(EXIT_INVALID_INPUT));
         }
     };
-    bar.finish();
     std::fs::create_dir_all(&a.out)
         .map_err(|e| format!("cannot create {}: {e}", a.out.display()))?;
     let cfg = config(&a);
+    let asked = a.tile_m.map(|size_m| TileConfig {
+        size_m,
+        overlap_m: a.tile_overlap_m,
+    });
+    let tiling = crate::tiles::choose(&b.manifest, &cfg, asked);
     let ctx = GpuContext::new_blocking().map_err(|e| e.to_string())?;
     eprintln!("preparing surfels…");
-    let mut s = pollster::block_on(Session::new(&mut b, cfg, ctx)).map_err(|e| e.to_string())?;
-    eprintln!(
-        "{} surfels ({} added by refinement), {} training views, {} held out",
-        s.prepare_report.surfels,
-        s.prepare_report.added_surfels,
-        s.train_views.len(),
-        s.holdout_views.len()
-    );
+    let mut run =
+        pollster::block_on(TiledRun::new(&mut b, cfg, tiling, ctx)).map_err(|e| e.to_string())?;
+    match &run.tiling {
+        Some(t) => eprintln!(
+            "{} tiles of {} m (overlap {} m), {} steps planned, {} drive(s)",
+            run.tiles.len(),
+            t.size_m,
+            t.overlap_m,
+            run.total_steps(),
+            b.drives.len()
+        ),
+        None => {
+            if let Some(s) = &run.session {
+                eprintln!(
+                    "{} surfels ({} added by refinement), {} training views, {} held out",
+                    s.prepare_report.surfels,
+                    s.prepare_report.added_surfels,
+                    s.train_views.len(),
+                    s.holdout_views.len()
+                );
+            }
+        }
+    }
     let mut bar = Progress::new("optimise");
-    let total = s.total_steps();
     let mut stopped = None;
     loop {
-        match pollster::block_on(s.step(&b)) {
+        match pollster::block_on(run.step(&b)) {
             Ok(Some(l)) => {
-                bar.set_message(&format!("loss {:.4}", l.total()));
-                bar.update(s.steps_done(), total);
+                let tile = match run.current_tile() {
+                    Some((k, name)) => format!("tile {}/{} {name}, ", k + 1, run.tile_count()),
+                    None => String::new(),
+                };
+                bar.set_message(&format!("{tile}loss {:.4}", l.total()));
+                bar.update(run.steps_done(), run.total_steps());
             }
             Ok(None) => break,
             Err(e) => {
@@ -169,20 +217,21 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
         }
     }
     bar.finish();
-    // The model is written before the BEV: a failure there must not lose the training.
-    let p = pollster::block_on(s.model()).map_err(|e| e.to_string())?;
-    let model = crate::export::model_files(&p, s.origin);
-    write_files(&a.out, &model)?;
     let mut bar = Progress::new("BEV");
-    let o = pollster::block_on(s.finish(&b, p, &mut |d, t| bar.update(d, t))).map_err(|e| {
+    let outcome = pollster::block_on(run.finish(&b, &mut |d, t| bar.update(d, t)));
+    bar.finish();
+    // The model is written whatever happened to the BEV: training is never lost.
+    let (p, origin) = run.model();
+    let model = crate::export::model_files(p, origin);
+    write_files(&a.out, &model)?;
+    let o = outcome.map_err(|e| {
         format!(
             "{e} (the trained model was written to {})",
             a.out.join("surfels.ply").display()
         )
     })?;
-    bar.finish();
     let mut files = crate::export::files(&o, &b.manifest);
-    let report = crate::reconstruct::report(&s, &o, &a.bundle.display().to_string());
+    let report = run.report(&b, &o, &names.join(" + "));
     files.push((
         "report.json".into(),
         serde_json::to_vec_pretty(&report).map_err(|e| e.to_string())?,
@@ -207,6 +256,24 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
     } else {
         ExitCode::SUCCESS
     })
+}
+
+fn positive_m64(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!(
+            "{s:?}: expected a positive number of metres, such as 64"
+        )),
+    }
+}
+
+fn non_negative_m64(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err(format!(
+            "{s:?}: expected a number of metres, 0 or more, such as 4"
+        )),
+    }
 }
 
 /// A distance in metres that must be positive and finite.

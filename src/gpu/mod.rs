@@ -103,7 +103,9 @@ impl AdapterReport {
     }
 }
 
-/// Device, queue and what they can do.
+/// Device, queue and what they can do. Cloning shares the device (its handles are
+/// reference-counted): the tiles of a run each hold one.
+#[derive(Clone)]
 pub struct GpuContext {
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
@@ -116,6 +118,21 @@ pub struct GpuContext {
 }
 
 impl GpuContext {
+    /// Bytes of GPU memory the device has reserved now (native Vulkan: wgpu's
+    /// allocator report); `None` where the backend does not say (WebGPU).
+    pub fn allocated_bytes(&self) -> Option<u64> {
+        #[cfg(not(target_arch = "wasm32"))]
+        {
+            self.device
+                .generate_allocator_report()
+                .map(|r| r.total_reserved_bytes)
+        }
+        #[cfg(target_arch = "wasm32")]
+        {
+            None
+        }
+    }
+
     /// Finds an adapter (high performance preferred) and opens a device with the
     /// adapter's own limits and the optional features we can use.
     pub async fn new() -> Result<Self, GpuError> {

@@ -53,6 +53,34 @@ pub enum GridError {
     BadConfig(f64, f64),
 }
 
+/// An axis-aligned rectangle in the world xy-plane, metres: `min` inclusive, `max`
+/// exclusive (a map tile, or a tile widened by its overlap).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Rect {
+    pub min: [f64; 2],
+    pub max: [f64; 2],
+}
+
+impl Rect {
+    pub fn contains(&self, p: [f64; 2]) -> bool {
+        p[0] >= self.min[0] && p[0] < self.max[0] && p[1] >= self.min[1] && p[1] < self.max[1]
+    }
+
+    /// The rectangle widened by `m` metres on every side.
+    pub fn grow(&self, m: f64) -> Rect {
+        Rect {
+            min: [self.min[0] - m, self.min[1] - m],
+            max: [self.max[0] + m, self.max[1] + m],
+        }
+    }
+
+    /// Squared distance from `p` to the rectangle (0 inside).
+    pub fn dist2(&self, p: [f64; 2]) -> f64 {
+        let d = |k: usize| (self.min[k] - p[k]).max(p[k] - self.max[k]).max(0.0);
+        d(0).powi(2) + d(1).powi(2)
+    }
+}
+
 /// The surfel lattice: positions and the index map.
 #[derive(Clone)]
 pub struct Grid {
@@ -68,7 +96,7 @@ pub struct Grid {
 }
 
 /// Squared distance from p to segment ab in the plane.
-fn dist2_segment(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+pub fn dist2_segment(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
     let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
     let len2 = dx * dx + dy * dy;
     let w = if len2 > 0.0 {
@@ -88,39 +116,67 @@ impl Grid {
         cfg: &GridConfig,
         bytes_per_surfel: u64,
     ) -> Result<Self, GridError> {
+        Self::corridor_of(&[path], cfg, bytes_per_surfel, None)
+    }
+
+    /// The base lattice vertices within `half_width` of any of the polylines `paths`
+    /// (one per drive: no corridor joins the end of one drive to the start of the
+    /// next), kept only inside `clip` (a world rectangle, a map tile) when given.
+    /// The lattice's origin depends on the paths only, never on `clip`, so the grids
+    /// of neighbouring tiles share their vertices where they overlap.
+    pub fn corridor_of(
+        paths: &[&[[f64; 2]]],
+        cfg: &GridConfig,
+        bytes_per_surfel: u64,
+        clip: Option<Rect>,
+    ) -> Result<Self, GridError> {
         let (res, hw) = (cfg.resolution, cfg.half_width);
         if !(res > 0.0 && hw > 0.0 && res.is_finite() && hw.is_finite()) {
             return Err(GridError::BadConfig(res, hw));
         }
-        let mut pts: Vec<[f64; 2]> = Vec::new();
-        for p in path {
-            if pts
-                .last()
-                .is_none_or(|q| (q[0] - p[0]).hypot(q[1] - p[1]) > 1e-6)
-            {
-                pts.push(*p);
+        let mut polylines: Vec<Vec<[f64; 2]>> = Vec::new();
+        for path in paths {
+            let mut pts: Vec<[f64; 2]> = Vec::new();
+            for p in path.iter() {
+                if pts
+                    .last()
+                    .is_none_or(|q| (q[0] - p[0]).hypot(q[1] - p[1]) > 1e-6)
+                {
+                    pts.push(*p);
+                }
+            }
+            if pts.len() >= 2 {
+                polylines.push(pts);
             }
         }
-        if pts.len() < 2 {
+        if polylines.is_empty() {
             return Err(GridError::NoPath);
         }
         // Origin on a multiple of the spacing so that grids of overlapping chunks align.
-        let x0 = pts.iter().map(|p| p[0]).fold(f64::MAX, f64::min) - hw;
-        let y0 = pts.iter().map(|p| p[1]).fold(f64::MAX, f64::min) - hw;
+        let all = || polylines.iter().flatten();
+        let x0 = all().map(|p| p[0]).fold(f64::MAX, f64::min) - hw;
+        let y0 = all().map(|p| p[1]).fold(f64::MAX, f64::min) - hw;
         let origin = [(x0 / res).floor() * res, (y0 / res).floor() * res];
         let base = |v: f64, o: f64| ((v - o) / res).round() as i32;
         let mut marks = IndexMap::default();
         let mut count: u64 = 0;
-        for s in pts.windows(2) {
+        for s in polylines.iter().flat_map(|p| p.windows(2)) {
             let (a, b) = (s[0], s[1]);
-            let (i0, i1) = (
+            let (mut i0, mut i1) = (
                 base(a[0].min(b[0]) - hw, origin[0]) - 1,
                 base(a[0].max(b[0]) + hw, origin[0]) + 1,
             );
-            let (j0, j1) = (
+            let (mut j0, mut j1) = (
                 base(a[1].min(b[1]) - hw, origin[1]) - 1,
                 base(a[1].max(b[1]) + hw, origin[1]) + 1,
             );
+            if let Some(c) = clip {
+                // Vertices with x in [min, max), y in [min, max): each tile's own.
+                i0 = i0.max(((c.min[0] - origin[0]) / res).ceil() as i32);
+                i1 = i1.min(((c.max[0] - origin[0]) / res).ceil() as i32 - 1);
+                j0 = j0.max(((c.min[1] - origin[1]) / res).ceil() as i32);
+                j1 = j1.min(((c.max[1] - origin[1]) / res).ceil() as i32 - 1);
+            }
             for j in j0.max(0)..=j1 {
                 for i in i0.max(0)..=i1 {
                     let p = [origin[0] + i as f64 * res, origin[1] + j as f64 * res];

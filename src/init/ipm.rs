@@ -44,6 +44,12 @@ pub struct Cams {
 /// metres ahead, so the nearest frames alone often do not see it.
 pub const CANDIDATE_FRAMES: usize = 16;
 
+/// Frames searched for a point's views: `CANDIDATE_FRAMES` per drive, so that where
+/// several drives pass, each drive's nearest frames are among them.
+pub fn candidate_frames(b: &Bundle) -> usize {
+    CANDIDATE_FRAMES * b.drives.len().max(1)
+}
+
 /// Views decoded at once (each 800×225 view is ~0.7 MB decoded).
 const DECODE_CHUNK: usize = 32;
 
@@ -225,7 +231,7 @@ pub fn mosaic(b: &Bundle, grid: &Grid, z: &[f32], poses: &PoseIndex) -> Result<B
     let candidates: Vec<Vec<Projection>> = crate::par::par_map(base.len(), |i| {
         let k = base[i];
         let [x, y] = grid.xy(k);
-        cams.candidates(poses, [x, y, z[k] as f64], CANDIDATE_FRAMES, 3)
+        cams.candidates(poses, [x, y, z[k] as f64], candidate_frames(b), 3)
     });
     sample_best(b, &cams, &candidates, |i, imgs, p| {
         let k = base[i];
@@ -258,7 +264,7 @@ pub fn surfel_colours(
     let candidates: Vec<Vec<Projection>> = crate::par::par_map(grid.len(), |k| {
         let [x, y] = grid.xy(k);
         let near: Vec<usize> = poses
-            .nearest(x, y, CANDIDATE_FRAMES)
+            .nearest(x, y, candidate_frames(b))
             .into_iter()
             .map(|(_, f)| f)
             .filter(|&f| use_frame(f))

@@ -5,7 +5,7 @@ use super::refine::{refine, RefineConfig, RefineReport};
 use super::{initialise, initialise_into, InitConfig, InitResult, PoseIndex, PosePlanes};
 use crate::bundle::transform::apply;
 use crate::bundle::{Bundle, Mat4Rows, Problem};
-use crate::grid::{Grid, GridConfig, GridError, Surfels};
+use crate::grid::{Grid, GridConfig, GridError, Rect, Surfels};
 use serde::Serialize;
 use thiserror::Error;
 use web_time::Instant;
@@ -17,6 +17,11 @@ pub struct PrepareConfig {
     pub refine: RefineConfig,
     /// Use the bundle's LiDAR (when it has any) for the refinement's height cue.
     pub use_lidar: bool,
+    /// Keep only the surfels inside this world rectangle (a map tile with its
+    /// overlap); the lattice is the whole corridor's, so tiles share vertices.
+    pub clip: Option<Rect>,
+    /// Frames whose LiDAR sweeps are read (a tile's); `None` reads every sweep.
+    pub frames: Option<Vec<bool>>,
 }
 
 #[derive(Debug, Error)]
@@ -54,6 +59,15 @@ pub struct Prepared {
 /// every frame that has a LiDAR sweep.
 pub fn for_each_sweep(
     b: &Bundle,
+    f: impl FnMut(usize, &Mat4Rows, Vec<[f64; 3]>),
+) -> Result<(), Problem> {
+    for_each_sweep_of(b, None, f)
+}
+
+/// As `for_each_sweep`, over the frames marked in `frames` only (all when `None`).
+pub fn for_each_sweep_of(
+    b: &Bundle,
+    frames: Option<&[bool]>,
     mut f: impl FnMut(usize, &Mat4Rows, Vec<[f64; 3]>),
 ) -> Result<(), Problem> {
     let m = &b.manifest;
@@ -61,6 +75,9 @@ pub fn for_each_sweep(
         return Ok(());
     };
     for (k, fr) in m.frames.iter().enumerate() {
+        if frames.is_some_and(|s| !s.get(k).copied().unwrap_or(false)) {
+            continue;
+        }
         let Some(path) = &fr.lidar else { continue };
         let pts = b.read_lidar(path)?;
         let pts = pts
@@ -75,8 +92,16 @@ pub fn for_each_sweep(
 /// Every LiDAR point of the bundle in the world frame (through the bundle's poses),
 /// with the index of the sweep it came from.
 pub fn lidar_world(b: &Bundle) -> Result<(Vec<[f64; 3]>, Vec<u32>), Problem> {
+    lidar_world_of(b, None)
+}
+
+/// As `lidar_world`, over the frames marked in `frames` only (all when `None`).
+pub fn lidar_world_of(
+    b: &Bundle,
+    frames: Option<&[bool]>,
+) -> Result<(Vec<[f64; 3]>, Vec<u32>), Problem> {
     let (mut out, mut sweep) = (Vec::new(), Vec::new());
-    for_each_sweep(b, |k, t, pts| {
+    for_each_sweep_of(b, frames, |k, t, pts| {
         out.extend(pts.into_iter().map(|p| apply(t, p)));
         sweep.resize(out.len(), k as u32);
     })?;
@@ -90,8 +115,19 @@ pub fn prepare(b: &Bundle, cfg: &PrepareConfig) -> Result<Prepared, PrepareError
     let bps = Surfels::bytes_per_surfel(classes);
     let t0 = Instant::now();
     let planes = PosePlanes::from_manifest(m);
-    let path: Vec<[f64; 2]> = planes.ground.iter().map(|g| [g[0], g[1]]).collect();
-    let mut grid = Grid::corridor(&path, &cfg.grid, bps)?;
+    // One polyline per drive: no corridor from one drive's end to the next's start.
+    let paths: Vec<Vec<[f64; 2]>> = b
+        .drives
+        .iter()
+        .map(|d| {
+            planes.ground[d.frames.clone()]
+                .iter()
+                .map(|g| [g[0], g[1]])
+                .collect()
+        })
+        .collect();
+    let paths: Vec<&[[f64; 2]]> = paths.iter().map(|p| p.as_slice()).collect();
+    let mut grid = Grid::corridor_of(&paths, &cfg.grid, bps, cfg.clip)?;
     let grid_ms = t0.elapsed().as_secs_f64() * 1e3;
     let t1 = Instant::now();
     let poses = PoseIndex::new(&planes);
@@ -100,7 +136,7 @@ pub fn prepare(b: &Bundle, cfg: &PrepareConfig) -> Result<Prepared, PrepareError
     let init_ms = t1.elapsed().as_secs_f64() * 1e3;
     let t2 = Instant::now();
     let (lidar_pts, sweeps) = if cfg.use_lidar {
-        lidar_world(b)?
+        lidar_world_of(b, cfg.frames.as_deref())?
     } else {
         Default::default()
     };

@@ -11,7 +11,7 @@
 //! marking edge (G and S) or a curb (Z and S) does. Cells above tau_a split 2×2: new surfels at the cell centre and edge midpoints, shared edge
 //! vertices created once (the index map deduplicates).
 
-use super::ipm::{sample_best, Cams, Projection, CANDIDATE_FRAMES};
+use super::ipm::{candidate_frames, sample_best, Cams, Projection};
 use super::PoseIndex;
 use crate::bundle::{Bundle, ClassRole, Problem};
 use crate::grid::Grid;
@@ -108,7 +108,7 @@ pub fn refine(
     let block_frames: Vec<Vec<usize>> = crate::par::par_map(blocks.len(), |k| {
         let [x, y] = grid.xy_of(blocks[k].0 * 16 + 8, blocks[k].1 * 16 + 8);
         poses
-            .nearest(x, y, CANDIDATE_FRAMES)
+            .nearest(x, y, candidate_frames(b))
             .into_iter()
             .map(|(_, f)| f)
             .collect()

@@ -1,0 +1,976 @@
+//! Spatial tiles: the map cut into squares of the world frame, trained one after the
+//! other so that the GPU holds one tile's surfels (with their optimiser state) and
+//! the views that see them, never the whole map.
+//!
+//! A tile is its *core* (a `size_m` square on a world-aligned lattice, so tiles of
+//! every drive of a place coincide) widened by `overlap_m` on each side: the *rect*
+//! whose surfels it trains. The lattice of surfels is the whole corridor's (its origin
+//! depends on the trajectory only), so two tiles that overlap hold the same vertices
+//! there; each trains them with the views that see its rect, from any pass of any
+//! drive. A place seen twice (a loop, a revisit, a second drive) is therefore one set
+//! of surfels trained by every view that sees it.
+//!
+//! Stitching (`Stitcher`): each finished tile renders its layers over its rect; the
+//! map blends them with weights that fall linearly to zero over the last
+//! `2·overlap_m` of each rect's edges, so that at every pixel of an overlap two (or
+//! four) tiles' weights sum to one and the colour, classes and elevation pass from
+//! one tile to the next without a step. The model (`surfels.ply`) keeps each surfel
+//! from the tile whose core holds it.
+//!
+//! The schedule (docs/ARCHITECTURE.md): tiles in the order the drive first sees
+//! them, each for the default schedule over its own views (epochs over the views
+//! that see it); a view that sees two tiles trains both. Tiles are independent jobs:
+//! the GPU working set is bounded by the largest tile, and a tile can be run apart.
+
+use crate::bev::BevGeometry;
+use crate::bundle::{Bundle, Manifest};
+use crate::eval::BevRaster;
+use crate::gpu::GpuContext;
+use crate::grid::{dist2_segment, Rect};
+use crate::init::align::AlignSummary;
+use crate::init::PosePlanes;
+use crate::optim::train::StepLoss;
+use crate::reconstruct::{
+    align, frame_xy, report, HoldoutSums, Layers, Outcome, ReconstructConfig, ReconstructError,
+    Session, UNSEEN_OPACITY_LOGIT,
+};
+use crate::render::from_bundle::view_camera;
+use crate::render::Params;
+use serde::Serialize;
+use web_time::Instant;
+
+/// How the map is cut.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct TileConfig {
+    /// Side of a tile's core, metres.
+    pub size_m: f64,
+    /// Each tile also trains this many metres beyond its core on every side; the
+    /// layers are blended over twice this width.
+    pub overlap_m: f64,
+}
+
+impl Default for TileConfig {
+    fn default() -> Self {
+        Self {
+            size_m: DEFAULT_TILE_M,
+            overlap_m: DEFAULT_OVERLAP_M,
+        }
+    }
+}
+
+/// The tile size chosen when a drive is too large to map in one piece.
+pub const DEFAULT_TILE_M: f64 = 96.0;
+pub const DEFAULT_OVERLAP_M: f64 = 4.0;
+/// A drive whose corridor is estimated above this many surfels is tiled by default.
+pub const AUTO_TILE_SURFELS: f64 = 4.0e6;
+
+/// One tile of a plan.
+#[derive(Clone, Debug)]
+pub struct Tile {
+    /// Lattice index (core = [i·size, (i+1)·size) × [j·size, (j+1)·size)).
+    pub id: [i64; 2],
+    pub core: Rect,
+    /// The core widened by the overlap: the surfels this tile trains.
+    pub rect: Rect,
+    /// Frames whose vehicle is near enough to see the rect (LiDAR, colours).
+    pub near_frames: Vec<bool>,
+    /// (frame, view) of every view that sees some of the tile's corridor, sorted.
+    pub views: Vec<(usize, usize)>,
+    /// Scene extent of the tile (the z learning rate's scale), metres.
+    pub extent: f32,
+}
+
+impl Tile {
+    /// `x3_y-2`: used in messages, reports and file names.
+    pub fn name(&self) -> String {
+        format!("x{}_y{}", self.id[0], self.id[1])
+    }
+
+    pub fn sees(&self, frame: usize, view: usize) -> bool {
+        self.views.binary_search(&(frame, view)).is_ok()
+    }
+}
+
+/// The estimated surfel count of a bundle's corridor (path length × width / cell).
+pub fn estimated_surfels(m: &Manifest, cfg: &ReconstructConfig) -> f64 {
+    let g = &cfg.prepare.grid;
+    let len = m.trajectory_length_m() + 2.0 * g.half_width;
+    len * 2.0 * g.half_width / (g.resolution * g.resolution)
+}
+
+/// The tiling a run uses: the one asked for, else tiles of `DEFAULT_TILE_M` when the
+/// corridor is too large to map whole, else none.
+pub fn choose(
+    m: &Manifest,
+    cfg: &ReconstructConfig,
+    asked: Option<TileConfig>,
+) -> Option<TileConfig> {
+    asked.or_else(|| (estimated_surfels(m, cfg) > AUTO_TILE_SURFELS).then(TileConfig::default))
+}
+
+/// Cuts the bundle's corridor into tiles, each with the views that see it, in the
+/// order the drive first sees them. Tiles no view sees are left out.
+pub fn plan(b: &Bundle, cfg: &ReconstructConfig, t: &TileConfig) -> Vec<Tile> {
+    let m = &b.manifest;
+    let planes = PosePlanes::from_manifest(m);
+    let hw = cfg.prepare.grid.half_width;
+    let cull = &cfg.train.cull;
+    let far = cull.far as f64;
+    let size = t.size_m.max(1.0);
+    let cell = |v: f64| (v / size).floor() as i64;
+    // Segments of each drive's ground path, bucketed by the tiles whose rect they
+    // may reach (so the plan costs the corridor's length, not tiles × segments).
+    let mut buckets: std::collections::BTreeMap<[i64; 2], Vec<Segment>> = Default::default();
+    let reach = hw + t.overlap_m;
+    for d in &b.drives {
+        let g = &planes.ground[d.frames.clone()];
+        for w in g.windows(2) {
+            let (a, c) = ([w[0][0], w[0][1]], [w[1][0], w[1][1]]);
+            for i in cell(a[0].min(c[0]) - reach)..=cell(a[0].max(c[0]) + reach) {
+                for j in cell(a[1].min(c[1]) - reach)..=cell(a[1].max(c[1]) + reach) {
+                    buckets.entry([i, j]).or_default().push((a, c));
+                }
+            }
+        }
+        if g.len() == 1 {
+            let a = [g[0][0], g[0][1]];
+            buckets
+                .entry([cell(a[0]), cell(a[1])])
+                .or_default()
+                .push((a, a));
+        }
+    }
+    let mut tiles = Vec::new();
+    for (id, segs) in buckets {
+        let core = Rect {
+            min: [id[0] as f64 * size, id[1] as f64 * size],
+            max: [(id[0] + 1) as f64 * size, (id[1] + 1) as f64 * size],
+        };
+        let rect = core.grow(t.overlap_m);
+        // Sample the corridor inside the rect on a lattice of ≤ 1 m.
+        let step = (hw / 2.0).clamp(0.25, 1.0);
+        let nx = ((rect.max[0] - rect.min[0]) / step).ceil() as usize;
+        let ny = ((rect.max[1] - rect.min[1]) / step).ceil() as usize;
+        let mut samples = Vec::new();
+        for iy in 0..ny {
+            for ix in 0..nx {
+                let p = [
+                    rect.min[0] + (ix as f64 + 0.5) * step,
+                    rect.min[1] + (iy as f64 + 0.5) * step,
+                ];
+                if segs.iter().any(|&(a, c)| dist2_segment(p, a, c) <= hw * hw) {
+                    samples.push(p);
+                }
+            }
+        }
+        if samples.is_empty() {
+            continue;
+        }
+        let mut near_frames = vec![false; m.frames.len()];
+        let mut views = Vec::new();
+        let mut near_xy = Vec::new();
+        for (f, fr) in m.frames.iter().enumerate() {
+            let g = planes.ground[f];
+            if rect.dist2([g[0], g[1]]) > (far + 5.0).powi(2) {
+                continue;
+            }
+            near_frames[f] = true;
+            near_xy.push(frame_xy(m, f));
+            for v in 0..fr.views.len() {
+                if sees(m, f, v, g, &samples, cull) {
+                    views.push((f, v));
+                }
+            }
+        }
+        if views.is_empty() {
+            continue;
+        }
+        let n = near_xy.len() as f64;
+        let c = near_xy
+            .iter()
+            .fold([0.0, 0.0], |a, p| [a[0] + p[0] / n, a[1] + p[1] / n]);
+        let r = near_xy
+            .iter()
+            .map(|p| (p[0] - c[0]).hypot(p[1] - c[1]))
+            .fold(0.0, f64::max);
+        tiles.push(Tile {
+            id,
+            core,
+            rect,
+            near_frames,
+            views,
+            extent: (1.1 * r).max(1.0) as f32,
+        });
+    }
+    tiles.sort_by_key(|t| (t.views[0], t.id));
+    tiles
+}
+
+/// A segment of a drive's ground path (xy ends).
+type Segment = ([f64; 2], [f64; 2]);
+
+/// Whether view `v` of frame `f` sees any of the ground samples (at the frame's
+/// ground height): inside the rasteriser's culling box and within the image, with a
+/// 10 % margin for relief.
+fn sees(
+    m: &Manifest,
+    f: usize,
+    v: usize,
+    ground: [f64; 3],
+    samples: &[[f64; 2]],
+    cull: &crate::render::CullConfig,
+) -> bool {
+    let Some(cam) = view_camera(m, f, v, ground, [0.0, 0.0]) else {
+        return false;
+    };
+    let w = &cam.world_to_cam;
+    let (mw, mh) = (0.1 * cam.width as f32, 0.1 * cam.height as f32);
+    samples.iter().any(|s| {
+        let p = [(s[0] - ground[0]) as f32, (s[1] - ground[1]) as f32, 0.0f32];
+        let c = |r: usize| w[r][0] * p[0] + w[r][1] * p[1] + w[r][2] * p[2] + w[r][3];
+        let (x, y, z) = (c(0), c(1), c(2));
+        if !(z >= cull.near && z <= cull.far && x.abs() <= cull.half_width) {
+            return false;
+        }
+        let u = cam.fx * x / z + cam.cx;
+        let vv = cam.fy * y / z + cam.cy;
+        u >= -mw && u <= cam.width as f32 + mw && vv >= -mh && vv <= cam.height as f32 + mh
+    })
+}
+
+/// Blends tiles' layers into the map's.
+pub struct Stitcher {
+    pub geometry: BevGeometry,
+    channels: usize,
+    min_alpha: f32,
+    weight: Vec<f32>,
+    rgb: Vec<f32>,
+    logits: Vec<f32>,
+    elevation: Vec<f32>,
+    alpha: Vec<f32>,
+    confidence: Vec<f32>,
+    density: Vec<f32>,
+    /// Largest alpha below the floor where no tile was valid.
+    faint: Vec<f32>,
+}
+
+/// A tile's window of the map raster: its top-left pixel and its geometry.
+#[derive(Clone, Copy, Debug)]
+pub struct Window {
+    pub col: u32,
+    pub row: u32,
+    pub geometry: BevGeometry,
+}
+
+impl Stitcher {
+    pub fn new(geometry: BevGeometry, channels: usize, min_alpha: f32) -> Self {
+        let n = (geometry.width * geometry.height) as usize;
+        Self {
+            geometry,
+            channels,
+            min_alpha,
+            weight: vec![0.0; n],
+            rgb: vec![0.0; 3 * n],
+            logits: vec![0.0; channels * n],
+            elevation: vec![0.0; n],
+            alpha: vec![0.0; n],
+            confidence: vec![0.0; n],
+            density: vec![0.0; n],
+            faint: vec![0.0; n],
+        }
+    }
+
+    /// The window of the map's raster that covers `r` (`None` when they are apart).
+    pub fn window(&self, r: &Rect) -> Option<Window> {
+        let g = &self.geometry;
+        let res = g.resolution;
+        let c0 = ((r.min[0] - g.origin[0]) / res).floor().max(0.0) as u32;
+        let c1 = (((r.max[0] - g.origin[0]) / res).ceil().max(0.0) as u32).min(g.width);
+        let r0 = ((g.origin[1] - r.max[1]) / res).floor().max(0.0) as u32;
+        let r1 = (((g.origin[1] - r.min[1]) / res).ceil().max(0.0) as u32).min(g.height);
+        (c1 > c0 && r1 > r0).then(|| Window {
+            col: c0,
+            row: r0,
+            geometry: BevGeometry {
+                origin: [g.origin[0] + c0 as f64 * res, g.origin[1] - r0 as f64 * res],
+                resolution: res,
+                width: c1 - c0,
+                height: r1 - r0,
+            },
+        })
+    }
+
+    /// Adds a tile's layers over `w`. `blend`: the tile's rect and the width over
+    /// which its weight falls to zero at the rect's edges (`None`: weight 1).
+    pub fn add(&mut self, w: &Window, l: &Layers, blend: Option<(Rect, f64)>) {
+        let g = self.geometry;
+        let ch = self.channels;
+        let (tw, th) = (w.geometry.width, w.geometry.height);
+        for y in 0..th {
+            for x in 0..tw {
+                let li = (y * tw + x) as usize;
+                let gi = ((w.row + y) * g.width + w.col + x) as usize;
+                let a = l.bev.alpha[li];
+                if a.is_nan() || a < self.min_alpha {
+                    self.faint[gi] = self.faint[gi].max(if a.is_finite() { a } else { 0.0 });
+                    continue;
+                }
+                let wt = match blend {
+                    Some((r, width)) if width > 0.0 => {
+                        let px = g.origin[0] + ((w.col + x) as f64 + 0.5) * g.resolution;
+                        let py = g.origin[1] - ((w.row + y) as f64 + 0.5) * g.resolution;
+                        let dx = (px - r.min[0]).min(r.max[0] - px);
+                        let dy = (py - r.min[1]).min(r.max[1] - py);
+                        ((dx / width).clamp(1e-3, 1.0) * (dy / width).clamp(1e-3, 1.0)) as f32
+                    }
+                    _ => 1.0,
+                };
+                self.weight[gi] += wt;
+                for c in 0..3 {
+                    self.rgb[3 * gi + c] += wt * l.bev.rgb[3 * li + c];
+                }
+                for c in 0..ch {
+                    self.logits[ch * gi + c] += wt * l.bev.logits[ch * li + c];
+                }
+                self.elevation[gi] += wt * l.bev.elevation[li];
+                self.alpha[gi] += wt * a;
+                self.confidence[gi] += wt * l.confidence[li];
+                self.density[gi] += wt * l.density[li];
+            }
+        }
+    }
+
+    /// The blended layers (NaN confidence, density and elevation where no tile
+    /// rendered anything).
+    pub fn finish(self) -> Layers {
+        let g = self.geometry;
+        let n = (g.width * g.height) as usize;
+        let ch = self.channels;
+        let mut out = Layers {
+            bev: crate::bev::BevImage {
+                width: g.width,
+                height: g.height,
+                channels: ch,
+                rgb: self.rgb,
+                logits: self.logits,
+                elevation: self.elevation,
+                alpha: self.alpha,
+            },
+            confidence: self.confidence,
+            density: self.density,
+        };
+        for i in 0..n {
+            let w = self.weight[i];
+            if w > 0.0 {
+                for c in 0..3 {
+                    out.bev.rgb[3 * i + c] /= w;
+                }
+                for c in 0..ch {
+                    out.bev.logits[ch * i + c] /= w;
+                }
+                out.bev.elevation[i] /= w;
+                out.bev.alpha[i] /= w;
+                out.confidence[i] /= w;
+                out.density[i] /= w;
+            } else {
+                out.bev.alpha[i] = self.faint[i];
+                out.bev.elevation[i] = f32::NAN;
+                out.confidence[i] = f32::NAN;
+                out.density[i] = f32::NAN;
+            }
+        }
+        out
+    }
+}
+
+/// What one tile did (report.json's `tiles`).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct TileReport {
+    pub name: String,
+    pub core: Option<Rect>,
+    pub rect: Option<Rect>,
+    pub surfels: usize,
+    pub added_surfels: usize,
+    pub training_views: usize,
+    pub holdout_views: usize,
+    pub steps: usize,
+    pub train_ms: f64,
+    pub prepare_ms: f64,
+    pub bev_ms: f64,
+    pub loss_last: StepLoss,
+    pub position_refreshes: usize,
+    pub pair_overflows: usize,
+    pub surfels_with_lidar: usize,
+    pub smoothness_edges: usize,
+    /// Peak GPU memory the device allocated while this tile ran (native Vulkan).
+    pub peak_gpu_bytes: Option<u64>,
+    /// Why the tile was skipped (no surfels or no view) or stopped.
+    pub stopped: Option<String>,
+}
+
+/// A reconstruction over tiles, stepped like a `Session` (one tile, the whole map,
+/// when the run is not tiled): the CLI and the page drive it the same way.
+pub struct TiledRun {
+    pub cfg: ReconstructConfig,
+    pub tiling: Option<TileConfig>,
+    pub tiles: Vec<Tile>,
+    /// The session of the tile being trained; after the run, the last tile's.
+    pub session: Option<Session>,
+    /// Tiles started so far (the current one included).
+    pub started: usize,
+    pub reports: Vec<TileReport>,
+    pub alignment: Option<AlignSummary>,
+    pub align_ms: f64,
+    /// The map's geometry (the truth raster's, or the corridor's bounding box).
+    pub geometry: BevGeometry,
+    truth: Option<BevRaster>,
+    stitch: Stitcher,
+    recorded: bool,
+    /// Every finished tile's core surfels, in the frame shifted by `model_origin`.
+    model: Params<f32>,
+    pub model_origin: [f64; 3],
+    centres: Vec<[f64; 3]>,
+    holdout: HoldoutSums,
+    holdout_views: usize,
+    z_change: (f64, usize),
+    ctx: GpuContext,
+    steps_done: usize,
+    planned_steps: usize,
+    pub peak_gpu_bytes: Option<u64>,
+    /// The first tile that failed, and why (the run stops there; the finished
+    /// tiles are kept).
+    pub failed: Option<String>,
+}
+
+impl TiledRun {
+    /// Aligns the poses (once, for every tile), plans the tiles and prepares the
+    /// first one.
+    pub async fn new(
+        b: &mut Bundle,
+        cfg: ReconstructConfig,
+        tiling: Option<TileConfig>,
+        ctx: GpuContext,
+    ) -> Result<Self, ReconstructError> {
+        let t = Instant::now();
+        let alignment = align(b, &cfg)?;
+        let align_ms = t.elapsed().as_secs_f64() * 1e3;
+        let b: &Bundle = b;
+        let truth = BevRaster::from_bundle(b)?;
+        let min_alpha = cfg.train.loss.min_alpha;
+        let channels = b.manifest.semantic_classes.len().max(1);
+        let epochs = if cfg.baseline_ipm {
+            0
+        } else {
+            cfg.train.epochs
+        };
+        let max_steps = cfg.train.max_steps.unwrap_or(usize::MAX);
+        let per_tile = move |views: usize| (views * epochs).min(max_steps);
+        let mut run = Self {
+            tiling,
+            tiles: Vec::new(),
+            session: None,
+            started: 0,
+            reports: Vec::new(),
+            alignment,
+            align_ms,
+            geometry: BevGeometry::around(std::iter::empty(), 1.0, 0.0),
+            stitch: Stitcher::new(BevGeometry::around(std::iter::empty(), 1.0, 0.0), 1, 0.0),
+            truth,
+            recorded: false,
+            model: Params {
+                channels,
+                ..Default::default()
+            },
+            model_origin: [0.0; 3],
+            centres: Vec::new(),
+            holdout: HoldoutSums::default(),
+            holdout_views: 0,
+            z_change: (0.0, 0),
+            ctx,
+            steps_done: 0,
+            planned_steps: 0,
+            peak_gpu_bytes: None,
+            failed: None,
+            cfg,
+        };
+        match tiling {
+            None => {
+                let s = Session::build(b, run.cfg.clone(), run.ctx.clone(), None).await?;
+                run.geometry = s.geometry(run.truth.as_ref());
+                run.planned_steps = s.total_steps();
+                run.model_origin = s.origin;
+                run.session = Some(s);
+                run.started = 1;
+            }
+            Some(t) => {
+                run.tiles = plan(b, &run.cfg, &t);
+                if run.tiles.is_empty() {
+                    return Err(ReconstructError::NoViews);
+                }
+                run.planned_steps = run.tiles.iter().map(|t| per_tile(t.views.len())).sum();
+                run.geometry = match &run.truth {
+                    Some(t) => BevGeometry::of_raster(t),
+                    None => {
+                        let res = run.cfg.prepare.grid.resolution;
+                        let hw = run.cfg.prepare.grid.half_width;
+                        let pts = PosePlanes::from_manifest(&b.manifest).ground;
+                        BevGeometry::around(pts.iter().map(|g| [g[0], g[1]]), res, hw + res)
+                    }
+                };
+                run.model_origin = [run.geometry.origin[0], run.geometry.origin[1], 0.0];
+            }
+        }
+        run.stitch = Stitcher::new(run.geometry, channels, min_alpha);
+        Ok(run)
+    }
+
+    pub fn total_steps(&self) -> usize {
+        self.planned_steps.max(self.steps_done)
+    }
+
+    pub fn steps_done(&self) -> usize {
+        self.steps_done
+    }
+
+    /// Tiles in the plan (1 when the run is not tiled).
+    pub fn tile_count(&self) -> usize {
+        self.tiles.len().max(1)
+    }
+
+    /// The tile being trained (its index in the plan and its name).
+    pub fn current_tile(&self) -> Option<(usize, String)> {
+        let k = self.started.checked_sub(1)?;
+        self.tiles.get(k).map(|t| (k, t.name()))
+    }
+
+    pub fn surfels(&self) -> usize {
+        self.reports.iter().map(|r| r.surfels).sum::<usize>()
+            + match (&self.session, self.recorded) {
+                (Some(s), false) => s.prepare_report.surfels,
+                _ => 0,
+            }
+    }
+
+    /// One optimisation step of the current tile, moving on to the next tile when
+    /// it is done; `Ok(None)` once every tile is trained. A tile's failure is
+    /// returned with the tile's name; the tiles finished before it are kept.
+    pub async fn step(&mut self, b: &Bundle) -> Result<Option<StepLoss>, ReconstructError> {
+        loop {
+            if self.failed.is_some() {
+                return Ok(None);
+            }
+            if self.session.is_none() || self.recorded {
+                if !self.start_next(b).await? {
+                    return Ok(None);
+                }
+                continue;
+            }
+            let Some(s) = self.session.as_mut() else {
+                return Ok(None);
+            };
+            if s.is_done() {
+                if self.tiling.is_none() {
+                    return Ok(None);
+                }
+                self.record(b).await?;
+                continue;
+            }
+            let r = s.step(b).await;
+            sample_gpu(&self.ctx, &mut self.peak_gpu_bytes);
+            match r {
+                Ok(Some(l)) => {
+                    self.steps_done += 1;
+                    return Ok(Some(l));
+                }
+                Ok(None) => continue,
+                Err(e) => return Err(self.fail(e)),
+            }
+        }
+    }
+
+    fn fail(&mut self, e: ReconstructError) -> ReconstructError {
+        match self.current_tile() {
+            Some((_, name)) => {
+                let msg = format!(
+                    "tile {name} failed: {e}; the {} tiles finished before it are kept",
+                    self.reports.iter().filter(|r| r.stopped.is_none()).count()
+                );
+                self.failed = Some(msg);
+                ReconstructError::Tile {
+                    tile: name,
+                    source: Box::new(e),
+                }
+            }
+            None => {
+                self.failed = Some(e.to_string());
+                e
+            }
+        }
+    }
+
+    /// Starts the next tile with surfels and views; false when none is left.
+    async fn start_next(&mut self, b: &Bundle) -> Result<bool, ReconstructError> {
+        while self.started < self.tiles.len() {
+            let tile = self.tiles[self.started].clone();
+            self.started += 1;
+            self.session = None;
+            self.recorded = false;
+            match Session::build(b, self.cfg.clone(), self.ctx.clone(), Some(&tile)).await {
+                Ok(s) => {
+                    self.session = Some(s);
+                    sample_gpu(&self.ctx, &mut self.peak_gpu_bytes);
+                    return Ok(true);
+                }
+                Err(ReconstructError::EmptyTile) => {
+                    // Its planned steps never come: the total follows what runs.
+                    let epochs = if self.cfg.baseline_ipm {
+                        0
+                    } else {
+                        self.cfg.train.epochs
+                    };
+                    let planned = (tile.views.len() * epochs)
+                        .min(self.cfg.train.max_steps.unwrap_or(usize::MAX));
+                    self.planned_steps = self.planned_steps.saturating_sub(planned);
+                    self.reports.push(TileReport {
+                        name: tile.name(),
+                        core: Some(tile.core),
+                        rect: Some(tile.rect),
+                        stopped: Some("skipped: no surfels, or no training view sees them".into()),
+                        ..Default::default()
+                    });
+                }
+                Err(e) => return Err(self.fail(e)),
+            }
+        }
+        Ok(false)
+    }
+
+    /// Renders the current tile's layers into the map and keeps its core surfels.
+    async fn record(&mut self, b: &Bundle) -> Result<(), ReconstructError> {
+        let Some(s) = self.session.as_mut() else {
+            return Ok(());
+        };
+        let t0 = Instant::now();
+        let tile = self
+            .started
+            .checked_sub(1)
+            .and_then(|k| self.tiles.get(k))
+            .cloned();
+        let p = s.model().await?;
+        // The model first: a failure in the BEV below must not lose it.
+        let keep: Vec<usize> = (0..p.len())
+            .filter(|&k| {
+                let xy = [
+                    p.pos[k][0] as f64 + s.origin[0],
+                    p.pos[k][1] as f64 + s.origin[1],
+                ];
+                tile.as_ref().is_none_or(|t| t.core.contains(xy))
+            })
+            .collect();
+        let shift = [0, 1, 2].map(|c| (s.origin[c] - self.model_origin[c]) as f32);
+        append(&mut self.model, &p, &keep, shift);
+        for &k in &keep {
+            let dz = (p.pos[k][2] - s.initial.pos[k][2]) as f64;
+            self.z_change.0 += dz * dz;
+        }
+        self.z_change.1 += keep.len();
+        self.centres.extend(
+            keep.iter()
+                .filter(|&&k| p.opacity[k] > UNSEEN_OPACITY_LOGIT + 1.0)
+                .map(|&k| [0, 1, 2].map(|c| p.pos[k][c] as f64 + s.origin[c])),
+        );
+        let (window, blend) = match &tile {
+            Some(t) => (
+                self.stitch.window(&t.rect),
+                Some((t.rect, 2.0 * self.tiling.map_or(0.0, |c| c.overlap_m))),
+            ),
+            None => (
+                Some(Window {
+                    col: 0,
+                    row: 0,
+                    geometry: self.geometry,
+                }),
+                None,
+            ),
+        };
+        if let Some(w) = window {
+            let layers = s.layers(&p, &w.geometry, &mut |_, _| {}).await?;
+            self.stitch.add(&w, &layers, blend);
+        }
+        s.holdout_sums(b, &mut self.holdout).await?;
+        self.holdout_views += s.holdout_views.len();
+        sample_gpu(&self.ctx, &mut self.peak_gpu_bytes);
+        let bev_ms = t0.elapsed().as_secs_f64() * 1e3;
+        s.timings.bev_ms += bev_ms;
+        self.reports.push(TileReport {
+            name: tile.as_ref().map_or("all".into(), |t| t.name()),
+            core: tile.as_ref().map(|t| t.core),
+            rect: tile.as_ref().map(|t| t.rect),
+            surfels: s.prepare_report.surfels,
+            added_surfels: s.prepare_report.added_surfels,
+            training_views: s.train_views.len(),
+            holdout_views: s.holdout_views.len(),
+            steps: s.steps_done(),
+            train_ms: s.timings.train_ms,
+            prepare_ms: s.timings.prepare_ms,
+            bev_ms,
+            loss_last: s.losses.last().copied().unwrap_or_default(),
+            position_refreshes: s.trainer.position_refreshes,
+            pair_overflows: s.trainer.pair_overflows,
+            surfels_with_lidar: s.with_lidar,
+            smoothness_edges: s.edges,
+            peak_gpu_bytes: self.peak_gpu_bytes,
+            stopped: s.stopped.clone(),
+        });
+        self.recorded = true;
+        Ok(())
+    }
+
+    /// The model of the tiles finished so far, and its origin.
+    pub fn model(&self) -> (&Params<f32>, [f64; 3]) {
+        (&self.model, self.model_origin)
+    }
+
+    /// The map: the blended layers of every finished tile, scored. Tiles not run
+    /// (after a failure) are holes in it.
+    pub async fn finish(
+        &mut self,
+        b: &Bundle,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<Outcome, ReconstructError> {
+        if self.session.is_some() && !self.recorded && self.failed.is_none() {
+            self.record(b).await?;
+        }
+        progress(1, 1);
+        let t = Instant::now();
+        let g = self.geometry;
+        let min_alpha = self.cfg.train.loss.min_alpha;
+        let channels = self.model.channels;
+        let stitch = std::mem::replace(&mut self.stitch, Stitcher::new(g, channels, min_alpha));
+        let layers = stitch.finish();
+        let holdout = self.holdout.holdout(self.holdout_views);
+        let o = Outcome::assemble(
+            b,
+            self.model.clone(),
+            g,
+            layers,
+            self.truth.clone(),
+            &self.centres,
+            holdout,
+            min_alpha,
+        )?;
+        if let Some(s) = self.session.as_mut() {
+            s.timings.eval_ms = t.elapsed().as_secs_f64() * 1e3;
+        }
+        Ok(o)
+    }
+
+    /// The current map colour as RGBA over the map's geometry, while training: the
+    /// finished tiles' blend with the current tile's model over its window.
+    pub async fn preview(&self) -> Result<Vec<u8>, ReconstructError> {
+        let min_alpha = self.cfg.train.loss.min_alpha;
+        let Some(s) = &self.session else {
+            return Ok(vec![
+                0;
+                (self.geometry.width * self.geometry.height * 4)
+                    as usize
+            ]);
+        };
+        if self.tiling.is_none() {
+            return Ok(s.preview(&self.geometry).await?);
+        }
+        let g = self.geometry;
+        let (w, h) = (g.width as usize, g.height as usize);
+        let mut out = vec![0u8; w * h * 4];
+        for i in 0..w * h {
+            let wt = self.stitch.weight[i];
+            if wt > 0.0 {
+                let c = |k: usize| {
+                    ((self.stitch.rgb[3 * i + k] / wt).clamp(0.0, 1.0) * 255.0).round() as u8
+                };
+                out[4 * i..4 * i + 4].copy_from_slice(&[c(0), c(1), c(2), 255]);
+            }
+        }
+        let tile = self.started.checked_sub(1).and_then(|k| self.tiles.get(k));
+        if let (Some(t), false) = (tile, self.recorded) {
+            if let Some(win) = self.stitch.window(&t.rect) {
+                let p = s.model().await?;
+                let img = s.render_bev(&p, &win.geometry, &mut |_, _| {}).await?;
+                let rgba = crate::reconstruct::rgba(&img.rgb, &img.alpha, min_alpha);
+                let tw = win.geometry.width as usize;
+                for y in 0..win.geometry.height as usize {
+                    for x in 0..tw {
+                        let li = y * tw + x;
+                        let gi = (win.row as usize + y) * w + win.col as usize + x;
+                        if rgba[4 * li + 3] > 0 {
+                            out[4 * gi..4 * gi + 4].copy_from_slice(&rgba[4 * li..4 * li + 4]);
+                        }
+                    }
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// report.json: the session's report for an untiled run, with the tiles and the
+    /// run's peak memory; totals over the tiles for a tiled one.
+    pub fn report(&self, b: &Bundle, o: &Outcome, bundle: &str) -> serde_json::Value {
+        let Some(s) = &self.session else {
+            return serde_json::json!({ "bundle": bundle, "stopped": self.failed });
+        };
+        let mut r = report(s, o, bundle);
+        r["pose_alignment"] = serde_json::to_value(&self.alignment).unwrap_or_default();
+        r["timings"]["align_ms"] = self.align_ms.into();
+        r["tiling"] = serde_json::to_value(self.tiling).unwrap_or_default();
+        r["tiles"] = serde_json::to_value(&self.reports).unwrap_or_default();
+        r["tile_count"] = self.reports.len().into();
+        r["peak_gpu_bytes"] = serde_json::to_value(self.peak_gpu_bytes).unwrap_or_default();
+        r["peak_host_bytes"] =
+            serde_json::to_value(crate::mem::peak_host_bytes()).unwrap_or_default();
+        r["drives"] = b
+            .drives
+            .iter()
+            .map(|d| serde_json::json!({ "name": d.name, "frames": d.frames.len() }))
+            .collect::<Vec<_>>()
+            .into();
+        if self.tiling.is_some() {
+            let rs = &self.reports;
+            let sum = |f: fn(&TileReport) -> usize| rs.iter().map(f).sum::<usize>();
+            let steps = sum(|t| t.steps);
+            let train_s = rs.iter().map(|t| t.train_ms).sum::<f64>() / 1e3;
+            r["surfels"] = serde_json::json!({
+                "surfels": sum(|t| t.surfels),
+                "added_surfels": sum(|t| t.added_surfels),
+                "base_surfels": sum(|t| t.surfels) - sum(|t| t.added_surfels),
+                "model_surfels": o.params.len(),
+            });
+            r["steps"] = steps.into();
+            r["training_views"] = sum(|t| t.training_views).into();
+            r["holdout_views"] = sum(|t| t.holdout_views).into();
+            r["position_refreshes"] = sum(|t| t.position_refreshes).into();
+            r["pair_overflows"] = sum(|t| t.pair_overflows).into();
+            r["surfels_with_lidar"] = sum(|t| t.surfels_with_lidar).into();
+            r["smoothness_edges"] = sum(|t| t.smoothness_edges).into();
+            r["z_change_rms_m"] = ((self.z_change.0 / self.z_change.1.max(1) as f64).sqrt()).into();
+            r["timings"]["train_ms"] = (train_s * 1e3).into();
+            r["timings"]["prepare_ms"] = rs.iter().map(|t| t.prepare_ms).sum::<f64>().into();
+            r["timings"]["bev_ms"] = rs.iter().map(|t| t.bev_ms).sum::<f64>().into();
+            r["seconds_per_step"] =
+                serde_json::to_value((steps > 0).then(|| train_s / steps as f64))
+                    .unwrap_or_default();
+            // Per epoch: every tile's views once (a view that sees two tiles counts twice).
+            let epochs = self.cfg.train.epochs.max(1) as f64;
+            let full = steps as f64 >= self.planned_steps as f64;
+            r["seconds_per_epoch"] = serde_json::to_value((steps > 0).then(|| {
+                if full {
+                    train_s / epochs
+                } else {
+                    train_s / steps as f64 * self.planned_steps as f64 / epochs
+                }
+            }))
+            .unwrap_or_default();
+            r["stopped"] = serde_json::to_value(&self.failed).unwrap_or_default();
+            if let Some(t) = self.tiling {
+                r["seams"] = serde_json::to_value(seams(&o.raster, t.size_m)).unwrap_or_default();
+            }
+        }
+        r
+    }
+}
+
+/// Steps between neighbouring map pixels across tile borders, against the same
+/// statistic across lines halfway between borders (inside tiles): a seam shows as
+/// border steps above the inside ones.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct Seams {
+    pub border_pairs: usize,
+    /// Mean |Δ elevation| (metres) and mean |Δ colour| (0–1, over RGB) across borders.
+    pub border_elevation_step_m: f64,
+    pub border_rgb_step: f64,
+    pub inside_pairs: usize,
+    pub inside_elevation_step_m: f64,
+    pub inside_rgb_step: f64,
+}
+
+/// The seam statistics of a map raster cut by tiles of `tile_m` metres.
+pub fn seams(r: &BevRaster, tile_m: f64) -> Seams {
+    // Sums per class of line: 0 borders (offset 0), 1 inside (offset half a tile).
+    let mut acc = [(0usize, 0.0f64, 0.0f64); 2];
+    let res = r.resolution;
+    let mut pair = |kind: usize, a: (u32, u32), b: (u32, u32)| {
+        if !(r.is_valid(a.0, a.1) && r.is_valid(b.0, b.1)) {
+            return;
+        }
+        let dz = (r.elevation_at(a.0, a.1) - r.elevation_at(b.0, b.1)).abs() as f64;
+        let (pa, pb) = (r.rgb.get_pixel(a.0, a.1).0, r.rgb.get_pixel(b.0, b.1).0);
+        let dc = (0..3)
+            .map(|c| (pa[c] as f64 - pb[c] as f64).abs() / 255.0)
+            .sum::<f64>()
+            / 3.0;
+        acc[kind].0 += 1;
+        acc[kind].1 += dz;
+        acc[kind].2 += dc;
+    };
+    // Which line class, if any, passes between pixel centres at world u and u + res.
+    let kind_between = |u: f64| -> Option<usize> {
+        let k0 = ((u) / (tile_m / 2.0)).floor();
+        let k1 = ((u + res) / (tile_m / 2.0)).floor();
+        (k1 > k0).then(|| (k1.rem_euclid(2.0) != 0.0) as usize)
+    };
+    for row in 0..r.height {
+        for col in 0..r.width.saturating_sub(1) {
+            let x = r.origin[0] + (col as f64 + 0.5) * res;
+            if let Some(k) = kind_between(x) {
+                pair(k, (col, row), (col + 1, row));
+            }
+        }
+    }
+    for row in 0..r.height.saturating_sub(1) {
+        // Row + 1 lies south: its y is smaller.
+        let y = r.origin[1] - (row as f64 + 1.5) * res;
+        if let Some(k) = kind_between(y) {
+            for col in 0..r.width {
+                pair(k, (col, row + 1), (col, row));
+            }
+        }
+    }
+    let mean = |a: (usize, f64, f64)| {
+        let n = a.0.max(1) as f64;
+        (a.1 / n, a.2 / n)
+    };
+    let (b, i) = (mean(acc[0]), mean(acc[1]));
+    Seams {
+        border_pairs: acc[0].0,
+        border_elevation_step_m: b.0,
+        border_rgb_step: b.1,
+        inside_pairs: acc[1].0,
+        inside_elevation_step_m: i.0,
+        inside_rgb_step: i.1,
+    }
+}
+
+/// Raises `peak` to the device's reserved bytes now, where the backend says.
+fn sample_gpu(ctx: &GpuContext, peak: &mut Option<u64>) {
+    if let Some(b) = ctx.allocated_bytes() {
+        *peak = Some(peak.unwrap_or(0).max(b));
+    }
+}
+
+/// Appends surfels `keep` of `p`, shifted by `shift`, to `model`.
+fn append(model: &mut Params<f32>, p: &Params<f32>, keep: &[usize], shift: [f32; 3]) {
+    let ch = p.channels;
+    model.channels = ch;
+    for &k in keep {
+        let q = p.pos[k];
+        model
+            .pos
+            .push([q[0] + shift[0], q[1] + shift[1], q[2] + shift[2]]);
+        model.rgb.push(p.rgb[k]);
+        model.log_scale.push(p.log_scale[k]);
+        model.opacity.push(p.opacity[k]);
+        model.rotation.push(p.rotation[k]);
+        model
+            .logits
+            .extend_from_slice(&p.logits[k * ch..(k + 1) * ch]);
+    }
+}

@@ -29,6 +29,8 @@ function settings() {
     align: $('set-align').checked,
     adaptive: $('set-adaptive').checked,
     init: $('set-init').value,
+    half_width: Number($('set-half-width').value) || 4,
+    ...(Number($('set-tile').value) > 0 ? { tile_m: Number($('set-tile').value) } : {}),
   };
 }
 
@@ -68,7 +70,7 @@ async function optimise(setStatus) {
     return;
   }
   run = { rec, paused: false, stopped: false };
-  const total = rec.total_steps();
+  let total = rec.total_steps();
   const losses = [];
   const t0 = performance.now();
   let lastPreview = performance.now();
@@ -87,9 +89,13 @@ async function optimise(setStatus) {
     if (loss === undefined) break;
     losses.push(loss);
     const done = rec.steps_done();
+    total = rec.total_steps();
     const per = (performance.now() - t0) / 1000 / done;
     $('progress').value = done / total;
-    $('progress-text').textContent = `step ${done} / ${total} · loss ${loss.toFixed(4)} · ${per.toFixed(2)} s per step · ETA ${fmtTime(per * (total - done))}`;
+    const tiles = rec.tiles();
+    const tile = tiles > 1 ? `tile ${rec.tile() + 1} / ${tiles} · ` : '';
+    document.body.dataset.tiles = String(tiles);
+    $('progress-text').textContent = `${tile}step ${done} / ${total} · loss ${loss.toFixed(4)} · ${per.toFixed(2)} s per step · ETA ${fmtTime(per * (total - done))}`;
     document.body.dataset.steps = String(done);
     if (done % 5 === 0) drawLoss(losses);
     // A live preview of the map, throttled: it renders the whole map.

@@ -183,6 +183,30 @@ test('the demo optimises in the page; layers, pan, zoom and exports work; errors
   await page.close();
 });
 
+test('the map is trained tile by tile in the page when a tile size is set', async () => {
+  const { page, errors } = await openPage();
+  await page.click('#demo');
+  await page.waitForSelector('#optimise:not([hidden])');
+  await page.selectOption('#set-resolution', '0.2');
+  await page.fill('#set-tile', '4');
+  await page.click('#run');
+  await page.waitForSelector('#viewer:not([hidden]) #exports a', { timeout: 170_000 });
+  assert.match(await page.textContent('#status'), /Map ready/);
+  assert.ok(Number(await page.getAttribute('body', 'data-tiles')) > 1, 'several tiles');
+  const r = await page.evaluate(async () => {
+    const a = [...document.querySelectorAll('#exports a')].find((x) => x.download === 'report.json');
+    return (await fetch(a.href)).json();
+  });
+  assert.equal(r.tiling.size_m, 4);
+  assert.ok(r.tile_count > 1, JSON.stringify(r.tiles));
+  assert.ok(r.tiles.filter((t) => t.steps > 0).length > 1, 'several tiles trained');
+  assert.ok(r.seams.border_pairs > 0);
+  assert.ok(r.metrics.psnr_db > 10, JSON.stringify(r.metrics));
+  await page.screenshot({ path: path.join(shots, 'map-tiled.png'), fullPage: true });
+  assert.deepEqual(errors, []);
+  await page.close();
+});
+
 test('the rasteriser benchmark runs in the page (scripts/bench-raster-page.mjs)', async () => {
   const { page, errors } = await openPage();
   const json = await page.evaluate(async () => {

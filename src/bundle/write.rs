@@ -63,7 +63,8 @@ impl<W: Write + Seek> ZipBundleWriter<W> {
         self.finish_raw()
     }
 
-    fn finish_raw(self) -> Result<W, String> {
+    /// Writes the central directory only (archives that are not bundles).
+    pub fn finish_raw(self) -> Result<W, String> {
         self.zip.finish().map_err(|e| e.to_string())
     }
 }

@@ -232,10 +232,10 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
     })?;
     let mut files = crate::export::files(&o, &b.manifest);
     let report = run.report(&b, &o, &names.join(" + "));
-    files.push((
-        "report.json".into(),
-        serde_json::to_vec_pretty(&report).map_err(|e| e.to_string())?,
-    ));
+    let report = serde_json::to_vec_pretty(&report).map_err(|e| e.to_string())?;
+    let map = crate::export::map_file::write(&o, &b.manifest, &report)?;
+    files.push(("report.json".into(), report));
+    files.push(("map.rogsmap".into(), map));
     write_files(&a.out, &files)?;
     if let Some(m) = &o.metrics {
         eprintln!("metrics: {}", serde_json::to_string(m).unwrap_or_default());

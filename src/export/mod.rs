@@ -2,6 +2,7 @@
 //! writes them to a folder and the page offers them as downloads, identically.
 
 pub mod colour;
+pub mod map_file;
 pub mod ply;
 
 use crate::bev::BevGeometry;

@@ -185,21 +185,13 @@ pub fn plan(b: &Bundle, cfg: &ReconstructConfig, t: &TileConfig) -> Vec<Tile> {
         if views.is_empty() {
             continue;
         }
-        let n = near_xy.len() as f64;
-        let c = near_xy
-            .iter()
-            .fold([0.0, 0.0], |a, p| [a[0] + p[0] / n, a[1] + p[1] / n]);
-        let r = near_xy
-            .iter()
-            .map(|p| (p[0] - c[0]).hypot(p[1] - c[1]))
-            .fold(0.0, f64::max);
         tiles.push(Tile {
             id,
             core,
             rect,
             near_frames,
             views,
-            extent: (1.1 * r).max(1.0) as f32,
+            extent: crate::optim::extent_of(&near_xy),
         });
     }
     tiles.sort_by_key(|t| (t.views[0], t.id));

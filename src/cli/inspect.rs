@@ -50,14 +50,7 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
         }
         Err(errors) => {
             if a.json {
-                let list: Vec<_> = errors
-                    .0
-                    .iter()
-                    .map(
-                        |p| serde_json::json!({"location": p.location(), "message": p.to_string()}),
-                    )
-                    .collect();
-                println!("{}", serde_json::json!({ "problems": list }));
+                print_problems(&errors);
             }
             eprintln!("{}: invalid bundle: {errors}", a.bundle.display());
             eprintln!("See docs/BUNDLE.md for the expected format.");
@@ -106,18 +99,21 @@ fn inspect_map(a: &Args, limits: Limits) -> Result<ExitCode, String> {
         }
         Err(errors) => {
             if a.json {
-                let list: Vec<_> = errors
-                    .0
-                    .iter()
-                    .map(
-                        |p| serde_json::json!({"location": p.location(), "message": p.to_string()}),
-                    )
-                    .collect();
-                println!("{}", serde_json::json!({ "problems": list }));
+                print_problems(&errors);
             }
             eprintln!("{}: invalid map file: {errors}", a.bundle.display());
             eprintln!("See docs/MAP.md for the expected format.");
             Ok(ExitCode::from(EXIT_INVALID_INPUT))
         }
     }
+}
+
+/// The problems as JSON on stdout (`--json`).
+fn print_problems(errors: &crate::bundle::BundleErrors) {
+    let list: Vec<_> = errors
+        .0
+        .iter()
+        .map(|p| serde_json::json!({"location": p.location(), "message": p.to_string()}))
+        .collect();
+    println!("{}", serde_json::json!({ "problems": list }));
 }

@@ -113,6 +113,11 @@ pub fn scene_extent(m: &Manifest) -> f32 {
         .iter()
         .map(|f| [f.vehicle_to_world[0][3], f.vehicle_to_world[1][3]])
         .collect();
+    extent_of(&pts)
+}
+
+/// The scene extent of vehicle positions `pts` (a tile's frames, say).
+pub fn extent_of(pts: &[[f64; 2]]) -> f32 {
     let n = pts.len().max(1) as f64;
     let c = pts
         .iter()

@@ -1,6 +1,11 @@
 //! Writes the bundles the page tests drop on the page: `valid.zip` (the tiny example)
 //! `invalid.zip` (a missing image, a broken pose and an unknown label value) and
-//! `demo.zip` (a tiny synthetic scene standing in for the demo).
+//! `demo.zip` (a tiny synthetic scene standing in for the demo), and the map files the
+//! review tests open: `truth.rogsmap` (the demo scene's truth at 5 cm: 3 × 2 tiles, 3
+//! levels), `raised.rogsmap` (the same with every elevation 3 cm higher, as map B),
+//! `big.rogsmap` (1.7 km of highway at 10 cm: 17 000 px, wider than a texture may
+//! be), `bad-format.rogsmap` and `truncated.rogsmap` (damaged), and `points.json`
+//! (world points on the road with their level-0 elevation, read natively).
 //! Usage: `cargo run --example page_fixtures -- OUT_DIR`.
 
 use rogs::bundle::example::{self, png_gray};
@@ -36,9 +41,123 @@ fn main() -> Result<(), String> {
         write_zip(&demo.manifest, &demo.files)?,
     )
     .map_err(|e| e.to_string())?;
+    maps(&out)?;
     eprintln!(
-        "wrote {}/valid.zip, invalid.zip and demo.zip",
+        "wrote {}/valid.zip, invalid.zip, demo.zip and the map files",
         out.display()
     );
     Ok(())
+}
+
+fn entries(zip: &[u8]) -> Result<Vec<(String, Vec<u8>)>, String> {
+    let mut a = zip::ZipArchive::new(std::io::Cursor::new(zip)).map_err(|e| e.to_string())?;
+    (0..a.len())
+        .map(|i| {
+            let mut f = a.by_index(i).map_err(|e| e.to_string())?;
+            let mut v = Vec::new();
+            std::io::Read::read_to_end(&mut f, &mut v).map_err(|e| e.to_string())?;
+            let name = f.name().map(|n| n.to_string()).unwrap_or_default();
+            Ok((name, v))
+        })
+        .collect()
+}
+
+fn rezip(files: &[(String, Vec<u8>)]) -> Result<Vec<u8>, String> {
+    let mut z = rogs::bundle::ZipBundleWriter::new(std::io::Cursor::new(Vec::new()));
+    for (n, b) in files {
+        z.add(n, b)?;
+    }
+    Ok(z.finish_raw()?.into_inner())
+}
+
+fn f32s(b: &[u8]) -> Vec<f32> {
+    b.chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect()
+}
+
+fn maps(out: &std::path::Path) -> Result<(), String> {
+    use rogs::export::map_file::MapIndex;
+    use rogs::synth::{truth, world_and_poses, Preset, SynthConfig};
+    let write = |name: &str, bytes: &[u8]| {
+        std::fs::write(out.join(name), bytes).map_err(|e| format!("{name}: {e}"))
+    };
+    let cfg = SynthConfig::preset(Preset::Demo, 1);
+    let (world, poses) = world_and_poses(&cfg, &|_, _, _| {});
+    let map = truth::map_file(&world, &poses, "demo truth", 6.0, 0.05, &mut |_, _| {})?;
+    write("truth.rogsmap", &map)?;
+    let files = entries(&map)?;
+    let raised: Vec<(String, Vec<u8>)> = files
+        .iter()
+        .map(|(n, b)| {
+            if n.starts_with("values/elevation/") {
+                let v: Vec<u8> = f32s(b)
+                    .iter()
+                    .flat_map(|z| (z + 0.03).to_le_bytes())
+                    .collect();
+                (n.clone(), v)
+            } else if n == "map.json" {
+                let t = String::from_utf8_lossy(b)
+                    .replace("\"demo truth\"", "\"demo truth, 3 cm higher\"");
+                (n.clone(), t.into_bytes())
+            } else {
+                (n.clone(), b.clone())
+            }
+        })
+        .collect();
+    write("raised.rogsmap", &rezip(&raised)?)?;
+    // Points on the road with their elevation from the level-0 tiles, for the profile.
+    let index: MapIndex = serde_json::from_slice(
+        &files
+            .iter()
+            .find(|f| f.0 == "map.json")
+            .ok_or("map.json")?
+            .1,
+    )
+    .map_err(|e| e.to_string())?;
+    let mut points = Vec::new();
+    for &(x, y) in &[(22.0, -1.0), (28.0, -2.5), (33.0, 0.5)] {
+        let col = ((x - index.origin[0]) / index.resolution).floor() as u32;
+        let row = ((index.origin[1] - y) / index.resolution).floor() as u32;
+        let (c, r) = (col / 256, row / 256);
+        let (tw, _) = index.tile_size(0, c, r);
+        let path = MapIndex::values_path("elevation", 0, c, r);
+        let tile = f32s(&files.iter().find(|f| f.0 == path).ok_or(path.clone())?.1);
+        let z = tile[((row - r * 256) * tw + (col - c * 256)) as usize];
+        points.push(serde_json::json!({ "x": x, "y": y, "z": z }));
+    }
+    write(
+        "points.json",
+        serde_json::to_string(&points)
+            .map_err(|e| e.to_string())?
+            .as_bytes(),
+    )?;
+    // Damaged copies.
+    let bad: Vec<(String, Vec<u8>)> = files
+        .iter()
+        .map(|(n, b)| {
+            if n == "map.json" {
+                let t = String::from_utf8_lossy(b).replace("\"rogs-map\"", "\"rogs-bundle\"");
+                (n.clone(), t.into_bytes())
+            } else {
+                (n.clone(), b.clone())
+            }
+        })
+        .collect();
+    write("bad-format.rogsmap", &rezip(&bad)?)?;
+    write("truncated.rogsmap", &map[..map.len() / 3])?;
+    // Wider than any texture: 1.7 km at 10 cm.
+    let mut cfg = SynthConfig::preset(Preset::Highway, 1);
+    cfg.set_length_m(1700.0);
+    cfg.field_cell = 0.25;
+    let (world, poses) = world_and_poses(&cfg, &|_, _, _| {});
+    let big = truth::map_file(
+        &world,
+        &poses,
+        "highway truth, 1.7 km",
+        6.0,
+        0.1,
+        &mut |_, _| {},
+    )?;
+    write("big.rogsmap", &big)
 }

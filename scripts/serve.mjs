@@ -9,7 +9,37 @@ const TYPES = {
   '.html': 'text/html; charset=utf-8', '.js': 'text/javascript', '.mjs': 'text/javascript',
   '.css': 'text/css', '.wasm': 'application/wasm', '.json': 'application/json',
   '.png': 'image/png', '.zip': 'application/zip', '.svg': 'image/svg+xml',
+  '.rogsmap': 'application/zip',
 };
+
+// One file, whole or as the single byte range a `Range: bytes=a-b` (or `bytes=-n`)
+// header asks for: the page reads map files lazily by range requests.
+function serveFile(req, res, file) {
+  fs.stat(file, (err, st) => {
+    if (err || !st.isFile()) { res.writeHead(404, { 'content-type': 'text/plain' }); res.end('not found'); return; }
+    const headers = {
+      'content-type': TYPES[path.extname(file)] || 'application/octet-stream',
+      'cache-control': 'no-store', 'accept-ranges': 'bytes',
+    };
+    const m = /^bytes=(\d*)-(\d*)$/.exec(req.headers.range || '');
+    let start = 0, end = st.size - 1, status = 200;
+    if (m && (m[1] || m[2])) {
+      if (m[1]) { start = Number(m[1]); if (m[2]) end = Math.min(end, Number(m[2])); }
+      else start = Math.max(0, st.size - Number(m[2]));
+      if (start > end || start >= st.size) {
+        res.writeHead(416, { 'content-range': `bytes */${st.size}` });
+        res.end();
+        return;
+      }
+      status = 206;
+      headers['content-range'] = `bytes ${start}-${end}/${st.size}`;
+    }
+    headers['content-length'] = String(end - start + 1);
+    res.writeHead(status, headers);
+    if (req.method === 'HEAD') { res.end(); return; }
+    fs.createReadStream(file, { start, end }).pipe(res);
+  });
+}
 
 /** mounts: [[urlPrefix, directory]], longest prefix first. */
 export function createServer(mounts) {
@@ -21,11 +51,7 @@ export function createServer(mounts) {
       if (rel.endsWith('/')) rel += 'index.html';
       const file = path.resolve(dir, rel);
       if (!file.startsWith(path.resolve(dir) + path.sep)) break;
-      fs.readFile(file, (err, data) => {
-        if (err) { res.writeHead(404, { 'content-type': 'text/plain' }); res.end('not found'); return; }
-        res.writeHead(200, { 'content-type': TYPES[path.extname(file)] || 'application/octet-stream', 'cache-control': 'no-store' });
-        res.end(data);
-      });
+      serveFile(req, res, file);
       return;
     }
     res.writeHead(404, { 'content-type': 'text/plain' });

@@ -77,8 +77,23 @@ fn a_map_file_holds_every_layer_as_a_tile_pyramid_and_damage_is_named() {
     // Level 0 reassembled from its tiles is the layer itself.
     let full = rogs::export::layer_rgba(&o, &b.manifest, "rgb").expect("rgb");
     let (tx, ty) = i.tiles(0);
+    let mut absent = 0;
     for r in 0..ty {
         for c in 0..tx {
+            if !i.is_present(0, c, r) {
+                // A tile left out is one where nothing is mapped.
+                let (tw, th) = i.tile_size(0, c, r);
+                for y in r * TILE..r * TILE + th {
+                    for x in c * TILE..c * TILE + tw {
+                        assert_eq!(full[((y * g.width + x) * 4 + 3) as usize], 0);
+                    }
+                }
+                assert!(!files
+                    .iter()
+                    .any(|f| f.0 == MapIndex::layer_path("rgb", 0, c, r)));
+                absent += 1;
+                continue;
+            }
             let img = image::load_from_memory(get(&MapIndex::layer_path("rgb", 0, c, r)))
                 .expect("png")
                 .to_rgba8();
@@ -97,10 +112,12 @@ fn a_map_file_holds_every_layer_as_a_tile_pyramid_and_damage_is_named() {
             .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
             .collect()
     };
+    eprintln!("{absent} of {} level-0 tiles left out as empty", tx * ty);
     // The level-0 tile with even indices that holds the most of the map.
     let (c0, r0) = (0..ty)
         .step_by(2)
         .flat_map(|r| (0..tx).step_by(2).map(move |c| (c, r)))
+        .filter(|&(c, r)| i.is_present(0, c, r))
         .max_by_key(|&(c, r)| {
             f32s(MapIndex::values_path("elevation", 0, c, r))
                 .iter()
@@ -146,13 +163,13 @@ fn a_map_file_holds_every_layer_as_a_tile_pyramid_and_damage_is_named() {
             Err(e) => e.to_string(),
         }
     };
-    let missing = MapIndex::layer_path("semantic", 1, 0, 0);
+    let missing = MapIndex::layer_path("semantic", 1, c0 / 2, r0 / 2);
     let e = problems(files.iter().filter(|f| f.0 != missing).cloned().collect());
     assert!(
         e.contains(&missing) && e.contains("not in the bundle"),
         "{e}"
     );
-    let bad = MapIndex::layer_path("rgb", 0, 1, 0);
+    let bad = MapIndex::layer_path("rgb", 0, c0, r0);
     let e = problems(
         files
             .iter()
@@ -166,7 +183,7 @@ fn a_map_file_holds_every_layer_as_a_tile_pyramid_and_damage_is_named() {
             .collect(),
     );
     assert!(e.contains(&bad) && e.contains("decode"), "{e}");
-    let short = MapIndex::values_path("elevation", 0, 0, 0);
+    let short = MapIndex::values_path("elevation", 0, c0, r0);
     let e = problems(
         files
             .iter()
@@ -251,4 +268,86 @@ fn a_map_file_holds_every_layer_as_a_tile_pyramid_and_damage_is_named() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains(&missing));
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The truth written tile by tile (`rogs synth --truth-map`) against the dense truth
+/// rasters of the same scene: every level-0 value and colour, the tiles left out
+/// exactly where nothing is valid, and the class areas in `stats`.
+#[test]
+fn the_streamed_truth_map_matches_the_dense_truth_rasters() {
+    use rogs::synth::{truth, world_and_poses};
+    let cfg = SynthConfig::preset(Preset::Demo, 1);
+    let (world, poses) = world_and_poses(&cfg, &|_, _, _| {});
+    let dense = truth::rasters(&world, &poses, 6.0, 0.05);
+    let map = truth::map_file(&world, &poses, "t", 6.0, 0.05, &mut |_, _| {}).expect("map");
+    let s = validate(map.clone(), &Limits::default()).expect("valid");
+    let i = &s.index;
+    assert_eq!(
+        (i.width, i.height, i.origin),
+        (dense.width, dense.height, dense.origin)
+    );
+    let files = entries(&map);
+    let get = |p: &str| files.iter().find(|f| f.0 == p).map(|f| f.1.clone());
+    let f32s = |b: Vec<u8>| -> Vec<f32> {
+        b.chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect()
+    };
+    let (tx, ty) = i.tiles(0);
+    let (mut compared, mut absent) = (0, 0);
+    for r in 0..ty {
+        for c in 0..tx {
+            let (tw, th) = i.tile_size(0, c, r);
+            let any_valid = (r * TILE..r * TILE + th)
+                .any(|y| (c * TILE..c * TILE + tw).any(|x| dense.valid.get_pixel(x, y).0[0] != 0));
+            assert_eq!(i.is_present(0, c, r), any_valid, "tile ({c}, {r})");
+            if !any_valid {
+                absent += 1;
+                continue;
+            }
+            let z = f32s(get(&MapIndex::values_path("elevation", 0, c, r)).expect("z"));
+            let k = f32s(get(&MapIndex::values_path("class", 0, c, r)).expect("class"));
+            let rgb =
+                image::load_from_memory(&get(&MapIndex::layer_path("rgb", 0, c, r)).expect("rgb"))
+                    .expect("png")
+                    .to_rgba8();
+            for y in 0..th {
+                for x in 0..tw {
+                    let (gx, gy) = (c * TILE + x, r * TILE + y);
+                    let o = (y * tw + x) as usize;
+                    if dense.valid.get_pixel(gx, gy).0[0] == 0 {
+                        assert!(z[o].is_nan() && k[o].is_nan() && rgb.get_pixel(x, y).0[3] == 0);
+                        continue;
+                    }
+                    assert_eq!(z[o], dense.elevation[(gy * dense.width + gx) as usize]);
+                    assert_eq!(k[o], dense.class_ids.get_pixel(gx, gy).0[0] as f32);
+                    assert_eq!(
+                        &rgb.get_pixel(x, y).0[..3],
+                        &dense.rgb.get_pixel(gx, gy).0[..]
+                    );
+                    compared += 1;
+                }
+            }
+        }
+    }
+    assert!(compared > 50_000, "{compared} pixels compared");
+    eprintln!(
+        "{compared} pixels equal; {absent} of {} tiles left out",
+        tx * ty
+    );
+    let stats = i.stats.as_ref().expect("stats");
+    let road = stats
+        .classes
+        .iter()
+        .find(|c| c.name == "road")
+        .expect("road");
+    let road_px = dense
+        .class_ids
+        .pixels()
+        .zip(dense.valid.pixels())
+        .filter(|(k, v)| v.0[0] != 0 && k.0[0] == road.id)
+        .count();
+    assert!((road.area_m2 - road_px as f64 * 0.0025).abs() < 1e-6);
+    let valid_px = dense.valid.pixels().filter(|v| v.0[0] != 0).count();
+    assert!((stats.mapped_m2 - valid_px as f64 * 0.0025).abs() < 1e-6);
 }

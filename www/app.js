@@ -3,6 +3,8 @@
 // sends user data anywhere: bundles are read in memory by the wasm engine.
 import init, { inspect_bundle, example_bundle, gpu_info } from './pkg/rogs.js';
 import { offerOptimisation, wireMap } from './map.js';
+import { openReview, wireReview } from './review.js';
+import { blobSource, isMapFile } from './rogsmap.js';
 
 const $ = (id) => document.getElementById(id);
 let engineReady = null;
@@ -129,6 +131,13 @@ async function openBytes(bytes, source) {
 
 async function openFile(file) {
   if (!file) return;
+  // Map files open in review, read lazily; everything else is a bundle.
+  if (/\.rogsmap$/i.test(file.name) || await isMapFile(blobSource(file))) {
+    await openReview(file);
+    return;
+  }
+  $('review').hidden = true;
+  $('map-problems').hidden = true;
   try {
     const bytes = new Uint8Array(await file.arrayBuffer());
     await openBytes(bytes, file.name);
@@ -154,6 +163,8 @@ async function openUrl(url) {
 function wireInputs() {
   $('picker').addEventListener('change', (e) => openFile(e.target.files[0]));
   $('demo').addEventListener('click', () => openUrl('demo/demo.zip'));
+  $('demo-map').addEventListener('click', () => openReview(null, { url: 'demo/demo-truth.rogsmap' }));
+
   $('example').addEventListener('click', async () => {
     await engineReady;
     try {
@@ -173,13 +184,14 @@ function wireInputs() {
     overlay.hidden = true;
     const file = e.dataTransfer && e.dataTransfer.files[0];
     if (file) openFile(file);
-    else setStatus('Nothing to open: drop a .zip file.', 'error');
+    else setStatus('Nothing to open: drop a bundle (.zip) or a map (.rogsmap).', 'error');
   });
 }
 
 async function main() {
   wireInputs();
   wireMap(setStatus);
+  wireReview(setStatus);
   engineReady = init();
   try {
     await engineReady;
@@ -191,8 +203,9 @@ async function main() {
   document.body.dataset.ready = 'true';
   await checkGpu();
   document.body.dataset.gpuChecked = 'true';
-  const url = new URLSearchParams(location.search).get('url');
-  if (url) await openUrl(url);
+  const q = new URLSearchParams(location.search);
+  if (q.get('map')) await openReview(null, { url: q.get('map'), b: q.get('b'), query: q });
+  else if (q.get('url')) await openUrl(q.get('url'));
 }
 
 main();

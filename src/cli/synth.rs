@@ -3,23 +3,32 @@
 use super::progress::Progress;
 use crate::bundle::write_zip;
 use crate::synth::rig::PoseNoise;
-use crate::synth::{generate, Preset, SynthConfig};
+use crate::synth::{generate, truth, world_and_poses, Preset, SynthConfig};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Mutex;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// tiny (unit tests, 1 camera 64×48), demo (3 cameras, ~25 m) or nuscenes-like
-    /// (6 cameras at 800×225, 240 frames, ~200 m).
+    /// tiny (unit tests, 1 camera 64×48), demo (3 cameras, ~25 m), nuscenes-like
+    /// (6 cameras at 800×225, 240 frames, ~200 m) or highway (3.7 km of gently curving
+    /// road, one 1241×376 camera; see --length-m).
     #[arg(long, default_value = "tiny")]
     preset: Preset,
     /// Random seed: the same seed and settings give the same bundle, byte for byte.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Output .zip.
+    /// Output bundle (.zip). Optional with --truth-map: then no image is rendered.
     #[arg(long)]
-    out: PathBuf,
+    out: Option<PathBuf>,
+    /// Also (or only) write the scene's truth as a map file (docs/MAP.md), at the
+    /// truth resolution: a reference to compare a reconstruction with in the page.
+    /// Written tile by tile, so a drive of any length fits in memory.
+    #[arg(long)]
+    truth_map: Option<PathBuf>,
+    /// Trajectory length in metres (sets the number of frames at the preset's spacing).
+    #[arg(long, conflicts_with = "frames")]
+    length_m: Option<f64>,
     /// Standard deviation of the translation noise added to the written poses, metres per axis.
     #[arg(long, default_value_t = 0.0)]
     pose_noise_m: f64,
@@ -66,37 +75,78 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
     };
     cfg.cameras = a.cameras.unwrap_or(cfg.cameras);
     cfg.frames = a.frames.unwrap_or(cfg.frames);
+    if let Some(m) = a.length_m {
+        if !(m.is_finite() && m > 0.0) {
+            return Err(format!(
+                "--length-m {m}: expected a positive length in metres"
+            ));
+        }
+        cfg.set_length_m(m);
+    }
+    if a.out.is_none() && a.truth_map.is_none() {
+        return Err(
+            "nothing to write: give --out BUNDLE.zip and/or --truth-map MAP.rogsmap".into(),
+        );
+    }
     cfg.width = a.width.unwrap_or(cfg.width);
     cfg.height = a.height.unwrap_or(cfg.height);
     cfg.truth_resolution = a.truth_resolution.unwrap_or(cfg.truth_resolution);
     cfg.rays_per_axis = a.rays_per_axis.unwrap_or(cfg.rays_per_axis).max(1);
     let t0 = std::time::Instant::now();
     let bar = Mutex::new(Progress::new("rendering"));
-    let out = generate(&cfg, &|stage, done, total| {
+    let report = |stage: &str, done: usize, total: usize| {
         if let Ok(mut b) = bar.lock() {
             b.set_message(stage);
             b.update(done, total);
         }
-    })?;
+    };
+    let name = format!("synthetic {:?} (seed {})", cfg.preset, cfg.seed);
+    let scene = match &a.out {
+        Some(out) => {
+            let s = generate(&cfg, &report)?;
+            if let Some(p) = &a.contact_sheet {
+                contact_sheet(&s, 4)?
+                    .save(p)
+                    .map_err(|e| format!("{}: {e}", p.display()))?;
+            }
+            let bytes = write_zip(&s.manifest, &s.files)?;
+            std::fs::write(out, &bytes).map_err(|e| format!("{}: {e}", out.display()))?;
+            eprintln!(
+                "wrote {} ({:.1} MiB, {} frames × {} cameras, {:.1} m) in {:.1} s",
+                out.display(),
+                bytes.len() as f64 / 1048576.0,
+                cfg.frames,
+                cfg.cameras,
+                s.manifest.trajectory_length_m(),
+                t0.elapsed().as_secs_f64()
+            );
+            (s.world, s.true_poses)
+        }
+        None => world_and_poses(&cfg, &report),
+    };
+    if let Some(p) = &a.truth_map {
+        let t1 = std::time::Instant::now();
+        let map = truth::map_file(
+            &scene.0,
+            &scene.1,
+            &format!("{name}, truth"),
+            cfg.corridor_half_width,
+            cfg.truth_resolution,
+            &mut |done, total| report("truth map tiles", done, total),
+        )?;
+        std::fs::write(p, &map).map_err(|e| format!("{}: {e}", p.display()))?;
+        eprintln!(
+            "wrote {} ({:.1} MiB, the truth at {} m per pixel over {:.1} m) in {:.1} s",
+            p.display(),
+            map.len() as f64 / 1048576.0,
+            cfg.truth_resolution,
+            cfg.trajectory_length(),
+            t1.elapsed().as_secs_f64()
+        );
+    }
     if let Ok(b) = bar.into_inner() {
         b.finish();
     }
-    if let Some(p) = &a.contact_sheet {
-        contact_sheet(&out, 4)?
-            .save(p)
-            .map_err(|e| format!("{}: {e}", p.display()))?;
-    }
-    let bytes = write_zip(&out.manifest, &out.files)?;
-    std::fs::write(&a.out, &bytes).map_err(|e| format!("{}: {e}", a.out.display()))?;
-    eprintln!(
-        "wrote {} ({:.1} MiB, {} frames × {} cameras, {:.1} m) in {:.1} s",
-        a.out.display(),
-        bytes.len() as f64 / 1048576.0,
-        cfg.frames,
-        cfg.cameras,
-        out.manifest.trajectory_length_m(),
-        t0.elapsed().as_secs_f64()
-    );
     Ok(ExitCode::SUCCESS)
 }
 

@@ -43,6 +43,16 @@ pub struct MapIndex {
     pub trajectory: Vec<[f64; 2]>,
     /// The run's report (an entry of the archive).
     pub report: String,
+    /// Elevation the `elevation` layer's colour ramp spans, metres (low, high).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub elevation_range: Option<[f32; 2]>,
+    /// Per level, one character per tile in row-major order: `1` where the tile is
+    /// in the archive, `0` where it was left out because nothing is mapped there.
+    /// Absent: every tile is present.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub present: Option<Vec<String>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stats: Option<MapStats>,
 }
 
 impl MapIndex {
@@ -67,6 +77,15 @@ impl MapIndex {
         )
     }
 
+    /// Whether tile (c, r) of level k is in the archive (see `present`).
+    pub fn is_present(&self, k: u32, c: u32, r: u32) -> bool {
+        let Some(p) = &self.present else { return true };
+        let tx = self.tiles(k).0;
+        p.get(k as usize)
+            .and_then(|l| l.as_bytes().get((r * tx + c) as usize))
+            .is_none_or(|&b| b == b'1')
+    }
+
     pub fn layer_path(name: &str, k: u32, c: u32, r: u32) -> String {
         format!("layers/{name}/{k}/{c}_{r}.png")
     }
@@ -87,7 +106,7 @@ fn level_count(w: u32, h: u32) -> u32 {
 
 /// Halves an RGBA image: each pixel the mean of the non-transparent pixels of its
 /// 2 × 2 block (transparent where none is).
-fn half_rgba(px: &[u8], w: u32, h: u32) -> (Vec<u8>, u32, u32) {
+fn half_rgba(px: &[u8], w: u32, h: u32) -> Vec<u8> {
     let (nw, nh) = (w.div_ceil(2), h.div_ceil(2));
     let mut out = vec![0u8; (nw * nh * 4) as usize];
     for y in 0..nh {
@@ -113,11 +132,11 @@ fn half_rgba(px: &[u8], w: u32, h: u32) -> (Vec<u8>, u32, u32) {
             }
         }
     }
-    (out, nw, nh)
+    out
 }
 
 /// Halves a float image: the mean of each 2 × 2 block's finite values.
-fn half_f32(v: &[f32], w: u32, h: u32) -> (Vec<f32>, u32, u32) {
+fn half_f32(v: &[f32], w: u32, h: u32) -> Vec<f32> {
     let (nw, nh) = (w.div_ceil(2), h.div_ceil(2));
     let mut out = vec![f32::NAN; (nw * nh) as usize];
     for y in 0..nh {
@@ -138,17 +157,26 @@ fn half_f32(v: &[f32], w: u32, h: u32) -> (Vec<f32>, u32, u32) {
             }
         }
     }
-    (out, nw, nh)
+    out
 }
 
 /// Pixels (c0.., r0..) of size tw × th out of a w-wide image of `n` values per pixel.
-fn crop<T: Copy>(px: &[T], w: u32, n: usize, c0: u32, r0: u32, tw: u32, th: u32) -> Vec<T> {
+pub fn crop<T: Copy>(px: &[T], w: u32, n: usize, c0: u32, r0: u32, tw: u32, th: u32) -> Vec<T> {
     let mut out = Vec::with_capacity((tw * th) as usize * n);
     for y in r0..r0 + th {
         let i = (y * w + c0) as usize * n;
         out.extend_from_slice(&px[i..i + tw as usize * n]);
     }
     out
+}
+
+/// Copies a tw-wide block of `n` values per pixel into a w-wide image at (x0, y0).
+fn paste<T: Copy>(dst: &mut [T], w: u32, n: usize, x0: u32, y0: u32, src: &[T], tw: u32) {
+    let row = tw as usize * n;
+    for (y, line) in src.chunks_exact(row).enumerate() {
+        let i = ((y0 as usize + y) * w as usize + x0 as usize) * n;
+        dst[i..i + row].copy_from_slice(line);
+    }
 }
 
 fn png_rgba(px: Vec<u8>, w: u32, h: u32) -> Vec<u8> {
@@ -158,69 +186,375 @@ fn png_rgba(px: Vec<u8>, w: u32, h: u32) -> Vec<u8> {
     }
 }
 
-/// The map file of a finished run.
-pub fn write(o: &Outcome, m: &Manifest, report: &[u8]) -> Result<Vec<u8>, String> {
-    let g = &o.geometry;
-    let index = MapIndex {
+/// A block of level-0 (or any level's) pixels, every layer: RGBA per entry of
+/// `MapIndex::layers` and floats per entry of `MapIndex::values`, row-major.
+#[derive(Clone, Debug)]
+pub struct Region {
+    pub width: u32,
+    pub height: u32,
+    pub rgba: Vec<Vec<u8>>,
+    pub values: Vec<Vec<f32>>,
+}
+
+impl Region {
+    /// Transparent and NaN everywhere.
+    pub fn empty(layers: usize, values: usize, width: u32, height: u32) -> Self {
+        let n = (width * height) as usize;
+        Self {
+            width,
+            height,
+            rgba: vec![vec![0; 4 * n]; layers],
+            values: vec![vec![f32::NAN; n]; values],
+        }
+    }
+
+    /// Whether any pixel of any layer holds something.
+    pub fn is_empty(&self) -> bool {
+        self.rgba
+            .iter()
+            .all(|l| l.chunks_exact(4).all(|p| p[3] == 0))
+            && self.values.iter().all(|v| v.iter().all(|x| x.is_nan()))
+    }
+
+    fn paste(&mut self, x0: u32, y0: u32, r: &Region) {
+        for (d, s) in self.rgba.iter_mut().zip(&r.rgba) {
+            paste(d, self.width, 4, x0, y0, s, r.width);
+        }
+        for (d, s) in self.values.iter_mut().zip(&r.values) {
+            paste(d, self.width, 1, x0, y0, s, r.width);
+        }
+    }
+
+    fn half(&self) -> Region {
+        let (w, h) = (self.width, self.height);
+        Region {
+            width: w.div_ceil(2),
+            height: h.div_ceil(2),
+            rgba: self.rgba.iter().map(|l| half_rgba(l, w, h)).collect(),
+            values: self.values.iter().map(|v| half_f32(v, w, h)).collect(),
+        }
+    }
+}
+
+/// Where a map's level-0 pixels come from, one tile at a time: the writer holds a
+/// few tiles per level, never the whole map, so a map's size is bounded by disk, not
+/// memory (the synthetic truth of a long drive is written this way).
+pub trait MapSource: Sync {
+    /// Pixels `[x0, x0 + w) × [y0, y0 + h)` of level 0 in the index's layer and value
+    /// order; `None` (or an empty region) where nothing is mapped.
+    fn region(&self, x0: u32, y0: u32, w: u32, h: u32) -> Result<Option<Region>, String>;
+}
+
+/// Error histogram bins: 5 mm wide up to 10 cm, the last one holds the rest.
+pub const ERROR_BIN_M: f64 = 0.005;
+const ERROR_BINS: usize = 21;
+
+/// `map.json`'s `stats`: what a reviewer reads without opening a tile.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MapStats {
+    /// Area with a mapped elevation, m².
+    pub mapped_m2: f64,
+    /// Area per class of the table (ids without pixels are left out), m².
+    pub classes: Vec<ClassArea>,
+    /// Counts of |elevation − truth| in bins of `bin_m` (the last bin holds the
+    /// rest), when the map has an error layer.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error_histogram: Option<Histogram>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ClassArea {
+    pub id: u8,
+    pub name: String,
+    pub area_m2: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Histogram {
+    pub bin_m: f64,
+    pub counts: Vec<u64>,
+}
+
+/// The index and statistics of a map being written.
+struct Writer<'a, W: std::io::Write + std::io::Seek> {
+    index: &'a MapIndex,
+    src: &'a dyn MapSource,
+    zip: crate::bundle::ZipBundleWriter<W>,
+    present: Vec<Vec<bool>>,
+    class_px: [u64; 256],
+    mapped_px: u64,
+    errors: Option<Vec<u64>>,
+    done: usize,
+    progress: &'a mut dyn FnMut(usize, usize),
+}
+
+impl<W: std::io::Write + std::io::Seek> Writer<'_, W> {
+    /// Tile (c, r) of level k, built from its four children at level k − 1 (level 0
+    /// from the source) and written; `None` when it is empty.
+    fn build(&mut self, k: u32, c: u32, r: u32) -> Result<Option<Region>, String> {
+        let i = self.index;
+        let (tw, th) = i.tile_size(k, c, r);
+        let region = if k == 0 {
+            let reg = self.src.region(c * i.tile, r * i.tile, tw, th)?;
+            self.done += 1;
+            let (tx, ty) = i.tiles(0);
+            (self.progress)(self.done, (tx * ty) as usize);
+            match reg {
+                Some(reg) if (reg.width, reg.height) != (tw, th) => {
+                    return Err(format!(
+                        "map source gave {}×{} pixels for tile ({c}, {r}), expected {tw}×{th}",
+                        reg.width, reg.height
+                    ))
+                }
+                Some(reg) if !reg.is_empty() => {
+                    self.count(&reg);
+                    Some(reg)
+                }
+                _ => None,
+            }
+        } else {
+            let (lw, lh) = i.level_size(k - 1);
+            let (mw, mh) = (
+                (lw - 2 * c * i.tile).min(2 * i.tile),
+                (lh - 2 * r * i.tile).min(2 * i.tile),
+            );
+            let (ntx, nty) = i.tiles(k - 1);
+            let mut mosaic: Option<Region> = None;
+            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                let (cc, rr) = (2 * c + dx, 2 * r + dy);
+                if cc >= ntx || rr >= nty {
+                    continue;
+                }
+                if let Some(child) = self.build(k - 1, cc, rr)? {
+                    mosaic
+                        .get_or_insert_with(|| {
+                            Region::empty(i.layers.len(), i.values.len(), mw, mh)
+                        })
+                        .paste(dx * i.tile, dy * i.tile, &child);
+                }
+            }
+            mosaic.map(|m| m.half())
+        };
+        if let Some(reg) = &region {
+            for (name, px) in i.layers.iter().zip(&reg.rgba) {
+                let png = png_rgba(px.clone(), tw, th);
+                self.zip.add(&MapIndex::layer_path(name, k, c, r), &png)?;
+            }
+            for (name, v) in i.values.iter().zip(&reg.values) {
+                let bytes: Vec<u8> = v.iter().flat_map(|x| x.to_le_bytes()).collect();
+                self.zip
+                    .add(&MapIndex::values_path(name, k, c, r), &bytes)?;
+            }
+            let tx = i.tiles(k).0;
+            self.present[k as usize][(r * tx + c) as usize] = true;
+        }
+        Ok(region)
+    }
+
+    /// Level-0 statistics: mapped area, class areas, the error histogram.
+    fn count(&mut self, reg: &Region) {
+        let value = |name: &str| {
+            self.index
+                .values
+                .iter()
+                .position(|v| v == name)
+                .map(|k| &reg.values[k])
+        };
+        if let Some(z) = value("elevation") {
+            self.mapped_px += z.iter().filter(|v| v.is_finite()).count() as u64;
+        }
+        if let Some(ids) = value("class") {
+            for v in ids.iter().filter(|v| v.is_finite()) {
+                self.class_px[(*v as usize).min(255)] += 1;
+            }
+        }
+        if let (Some(e), Some(h)) = (value("error").cloned(), self.errors.as_mut()) {
+            for v in e.iter().filter(|v| v.is_finite()) {
+                h[((*v as f64 / ERROR_BIN_M) as usize).min(ERROR_BINS - 1)] += 1;
+            }
+        }
+    }
+}
+
+/// Writes a map file: `index` (its `present` and `stats` are filled in here) with
+/// level-0 pixels from `src`, built into the pyramid tile by tile. Empty tiles are
+/// left out and marked so in `present`. `progress(done, total)` counts level-0 tiles.
+pub fn write_from(
+    mut index: MapIndex,
+    src: &dyn MapSource,
+    report: &[u8],
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Vec<u8>, String> {
+    index.levels = level_count(index.width, index.height);
+    let mut w = Writer {
+        index: &index,
+        src,
+        zip: crate::bundle::ZipBundleWriter::new(std::io::Cursor::new(Vec::new())),
+        present: (0..index.levels)
+            .map(|k| {
+                let (tx, ty) = index.tiles(k);
+                vec![false; (tx * ty) as usize]
+            })
+            .collect(),
+        class_px: [0; 256],
+        mapped_px: 0,
+        errors: index
+            .values
+            .iter()
+            .any(|v| v == "error")
+            .then(|| vec![0; ERROR_BINS]),
+        done: 0,
+        progress,
+    };
+    w.build(index.levels - 1, 0, 0)?;
+    w.zip.add(&index.report, report)?;
+    let px_m2 = index.resolution * index.resolution;
+    let stats = MapStats {
+        mapped_m2: w.mapped_px as f64 * px_m2,
+        classes: index
+            .classes
+            .iter()
+            .filter(|c| w.class_px[c.id as usize] > 0)
+            .map(|c| ClassArea {
+                id: c.id,
+                name: c.name.clone(),
+                area_m2: w.class_px[c.id as usize] as f64 * px_m2,
+            })
+            .collect(),
+        error_histogram: w.errors.take().map(|counts| Histogram {
+            bin_m: ERROR_BIN_M,
+            counts,
+        }),
+    };
+    let present = w
+        .present
+        .iter()
+        .map(|p| p.iter().map(|&b| if b { '1' } else { '0' }).collect())
+        .collect();
+    let mut zip = w.zip;
+    index.present = Some(present);
+    index.stats = Some(stats);
+    let json = serde_json::to_vec_pretty(&index).map_err(|e| e.to_string())?;
+    zip.add(INDEX, &json)?;
+    Ok(zip.finish_raw()?.into_inner())
+}
+
+/// A finished run's layers, held in memory, as a map source.
+struct OutcomeSource {
+    width: u32,
+    rgba: Vec<Vec<u8>>,
+    values: Vec<Vec<f32>>,
+}
+
+impl MapSource for OutcomeSource {
+    fn region(&self, x0: u32, y0: u32, w: u32, h: u32) -> Result<Option<Region>, String> {
+        let reg = Region {
+            width: w,
+            height: h,
+            rgba: self
+                .rgba
+                .iter()
+                .map(|l| crop(l, self.width, 4, x0, y0, w, h))
+                .collect(),
+            values: self
+                .values
+                .iter()
+                .map(|v| crop(v, self.width, 1, x0, y0, w, h))
+                .collect(),
+        };
+        Ok(Some(reg))
+    }
+}
+
+/// The index of a map before it is written: georeference, layers and values named,
+/// `levels`, `present` and `stats` to be filled in by `write_from`.
+pub fn new_index(
+    name: &str,
+    classes: &[SemanticClass],
+    trajectory: Vec<[f64; 2]>,
+    g: &crate::bev::BevGeometry,
+    layers: &[&str],
+    values: &[&str],
+) -> MapIndex {
+    MapIndex {
         format: FORMAT.into(),
         version: VERSION,
-        name: m.name.clone(),
+        name: name.into(),
         origin: g.origin,
         resolution: g.resolution,
         width: g.width,
         height: g.height,
         tile: TILE,
         levels: level_count(g.width, g.height),
-        layers: super::LAYERS
-            .iter()
-            .filter(|l| **l != "error" || o.truth.is_some())
-            .map(|l| l.to_string())
-            .collect(),
-        values: vec!["elevation".into()],
-        classes: m.semantic_classes.clone(),
-        trajectory: m
-            .frames
-            .iter()
-            .map(|f| [f.vehicle_to_world[0][3], f.vehicle_to_world[1][3]])
-            .collect(),
+        layers: layers.iter().map(|l| l.to_string()).collect(),
+        values: values.iter().map(|l| l.to_string()).collect(),
+        classes: classes.to_vec(),
+        trajectory,
         report: "report.json".into(),
+        elevation_range: None,
+        present: None,
+        stats: None,
+    }
+}
+
+/// Vehicle positions (world x, y) of a manifest's frames.
+pub fn trajectory(m: &Manifest) -> Vec<[f64; 2]> {
+    m.frames
+        .iter()
+        .map(|f| [f.vehicle_to_world[0][3], f.vehicle_to_world[1][3]])
+        .collect()
+}
+
+/// The map file of a finished run: every layer, and as values the elevation, the
+/// class id, confidence, density and (with truth) the elevation error.
+pub fn write(o: &Outcome, m: &Manifest, report: &[u8]) -> Result<Vec<u8>, String> {
+    let g = &o.geometry;
+    let layers: Vec<&str> = super::LAYERS
+        .iter()
+        .copied()
+        .filter(|l| *l != "error" || o.truth.is_some())
+        .collect();
+    let z = super::elevation(o);
+    let (lo, hi) = super::range(&z);
+    let class: Vec<f32> = o
+        .raster
+        .class_ids
+        .as_raw()
+        .iter()
+        .zip(o.raster.valid.as_raw())
+        .map(|(&c, &v)| if v != 0 { c as f32 } else { f32::NAN })
+        .collect();
+    let mut values = vec![
+        ("elevation", z),
+        ("class", class),
+        ("confidence", o.confidence.clone()),
+        ("density", o.density.clone()),
+    ];
+    if let Some(e) = super::elevation_error(o) {
+        values.push(("error", e));
+    }
+    let names: Vec<&str> = values.iter().map(|v| v.0).collect();
+    let mut index = new_index(
+        &m.name,
+        &m.semantic_classes,
+        trajectory(m),
+        g,
+        &layers,
+        &names,
+    );
+    index.elevation_range = Some([lo, hi]);
+    let src = OutcomeSource {
+        width: g.width,
+        rgba: layers
+            .iter()
+            .map(|l| {
+                super::layer_rgba(o, m, l)
+                    .unwrap_or_else(|| vec![0; (4 * g.width * g.height) as usize])
+            })
+            .collect(),
+        values: values.into_iter().map(|v| v.1).collect(),
     };
-    let mut zip = crate::bundle::ZipBundleWriter::new(std::io::Cursor::new(Vec::new()));
-    let json = serde_json::to_vec_pretty(&index).map_err(|e| e.to_string())?;
-    zip.add(INDEX, &json)?;
-    zip.add(&index.report, report)?;
-    for name in &index.layers {
-        let Some(mut px) = super::layer_rgba(o, m, name) else {
-            continue;
-        };
-        let (mut w, mut h) = (g.width, g.height);
-        for k in 0..index.levels {
-            let (tx, ty) = index.tiles(k);
-            for r in 0..ty {
-                for c in 0..tx {
-                    let (tw, th) = index.tile_size(k, c, r);
-                    let t = crop(&px, w, 4, c * TILE, r * TILE, tw, th);
-                    zip.add(&MapIndex::layer_path(name, k, c, r), &png_rgba(t, tw, th))?;
-                }
-            }
-            (px, w, h) = half_rgba(&px, w, h);
-        }
-    }
-    let mut z = super::elevation(o);
-    let (mut w, mut h) = (g.width, g.height);
-    for k in 0..index.levels {
-        let (tx, ty) = index.tiles(k);
-        for r in 0..ty {
-            for c in 0..tx {
-                let (tw, th) = index.tile_size(k, c, r);
-                let t = crop(&z, w, 1, c * TILE, r * TILE, tw, th);
-                let bytes: Vec<u8> = t.iter().flat_map(|v| v.to_le_bytes()).collect();
-                zip.add(&MapIndex::values_path("elevation", k, c, r), &bytes)?;
-            }
-        }
-        (z, w, h) = half_f32(&z, w, h);
-    }
-    Ok(zip.finish_raw()?.into_inner())
+    write_from(index, &src, report, &mut |_, _| {})
 }
 
 fn invalid(field: &str, what: impl Into<String>) -> Problem {
@@ -312,10 +646,30 @@ pub fn validate(bytes: Vec<u8>, limits: &Limits) -> Result<MapSummary, BundleErr
     }
     let mut tiles = 0;
     let levels = index.levels.min(level_count(index.width, index.height));
+    if let Some(p) = &index.present {
+        if p.len() != levels as usize {
+            problems.push(invalid(
+                "present",
+                format!("{} levels listed, expected {levels}", p.len()),
+            ));
+        }
+        for (k, l) in p.iter().enumerate().take(levels as usize) {
+            let (tx, ty) = index.tiles(k as u32);
+            if l.len() != (tx * ty) as usize || l.bytes().any(|b| b != b'0' && b != b'1') {
+                problems.push(invalid(
+                    &format!("present[{k}]"),
+                    format!("expected {} characters 0 or 1 ({tx}×{ty} tiles)", tx * ty),
+                ));
+            }
+        }
+    }
     for k in 0..levels {
         let (tx, ty) = index.tiles(k);
         for r in 0..ty {
             for c in 0..tx {
+                if !index.is_present(k, c, r) {
+                    continue;
+                }
                 let (tw, th) = index.tile_size(k, c, r);
                 for name in &index.layers {
                     let path = MapIndex::layer_path(name, k, c, r);

@@ -38,7 +38,7 @@ pub fn npy(v: &[f32], width: u32, height: u32) -> Vec<u8> {
 }
 
 /// Finite minimum and maximum (0, 1 when there is none).
-fn range(v: &[f32]) -> (f32, f32) {
+pub(crate) fn range(v: &[f32]) -> (f32, f32) {
     let (lo, hi) = v
         .iter()
         .filter(|x| x.is_finite())
@@ -176,6 +176,16 @@ pub fn files(o: &Outcome, m: &Manifest) -> Vec<(String, Vec<u8>)> {
     out
 }
 
+/// Values through the colour ramp from `lo` to `hi`, as RGBA (transparent where NaN).
+pub fn ramp_rgba(v: &[f32], lo: f32, hi: f32) -> Vec<u8> {
+    v.iter()
+        .flat_map(|&x| {
+            let c = colour::ramp((x - lo) / (hi - lo).max(1e-6));
+            [c[0], c[1], c[2], if x.is_finite() { 255 } else { 0 }]
+        })
+        .collect()
+}
+
 /// Names of the layers `layer_rgba` renders.
 pub const LAYERS: [&str; 6] = [
     "rgb",
@@ -198,14 +208,7 @@ pub fn layer_rgba(o: &Outcome, m: &Manifest, name: &str) -> Option<Vec<u8>> {
             .flat_map(|(i, p)| [p.0[0], p.0[1], p.0[2], if valid(i) { 255 } else { 0 }])
             .collect()
     };
-    let from_values = |v: &[f32], lo: f32, hi: f32| -> Vec<u8> {
-        v.iter()
-            .flat_map(|&x| {
-                let c = colour::ramp((x - lo) / (hi - lo).max(1e-6));
-                [c[0], c[1], c[2], if x.is_finite() { 255 } else { 0 }]
-            })
-            .collect()
-    };
+    let from_values = ramp_rgba;
     match name {
         "rgb" => Some(from_rgb(&r.rgb)),
         "semantic" => Some(from_rgb(&semantic_colours(m, &r.class_ids, &r.valid))),

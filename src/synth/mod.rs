@@ -34,6 +34,10 @@ pub enum Preset {
     Demo,
     /// The performance reference: 6 cameras at 800×225, 240 frames, ~200 m of road.
     NuscenesLike,
+    /// 3.7 km of two-lane road with gentle curves (no turn: a slim bounding box), one
+    /// forward camera at KITTI's 1241×376, a frame every metre, 10 cm height field.
+    /// For scaling runs (`--length-m` shortens it) and map-viewer benchmarks.
+    Highway,
 }
 
 impl std::str::FromStr for Preset {
@@ -43,8 +47,9 @@ impl std::str::FromStr for Preset {
             "tiny" => Ok(Preset::Tiny),
             "demo" => Ok(Preset::Demo),
             "nuscenes-like" => Ok(Preset::NuscenesLike),
+            "highway" => Ok(Preset::Highway),
             _ => Err(format!(
-                "unknown preset {s:?}; expected tiny, demo or nuscenes-like"
+                "unknown preset {s:?}; expected tiny, demo, nuscenes-like or highway"
             )),
         }
     }
@@ -112,7 +117,20 @@ impl SynthConfig {
                 field_cell: 0.05,
                 ..base
             },
+            Preset::Highway => SynthConfig {
+                frames: 3701,
+                width: 1241,
+                height: 376,
+                truth_resolution: 0.05,
+                field_cell: 0.1,
+                ..base
+            },
         }
+    }
+
+    /// Sets the frame count for a trajectory of `m` metres.
+    pub fn set_length_m(&mut self, m: f64) {
+        self.frames = ((m / self.frame_spacing_m).round() as usize + 1).max(2);
     }
 
     pub fn trajectory_length(&self) -> f64 {
@@ -151,7 +169,18 @@ pub fn road_spec(cfg: &SynthConfig) -> RoadSpec {
     let s0 = cfg.start_s();
     let lt = cfg.trajectory_length();
     let total = s0 + lt + 45.0;
-    let pieces = if total >= 150.0 {
+    let pieces = if cfg.preset == Preset::Highway {
+        // Curves of 12 km radius: over 3.7 km the road drifts about 100 m sideways,
+        // so its bounding box, and the height field over it, stay slim.
+        let p = total / 5.0;
+        vec![
+            (p, 0.0),
+            (p, 1.0 / 12000.0),
+            (p, 0.0),
+            (p, -1.0 / 12000.0),
+            (p, 0.0),
+        ]
+    } else if total >= 150.0 {
         let turn = 20.0 * std::f64::consts::FRAC_PI_2;
         let a = 0.22 * total;
         let b = 0.15 * total;
@@ -186,23 +215,8 @@ pub fn road_spec(cfg: &SynthConfig) -> RoadSpec {
 /// Progress callback: (stage, done, total).
 pub type Progress<'a> = &'a (dyn Fn(&str, usize, usize) + Sync);
 
-/// Generates the scene. Deterministic for a config (and independent of thread count).
-pub fn generate(cfg: &SynthConfig, progress: Progress) -> Result<SynthOutput, String> {
-    if cfg.frames < 2
-        || cfg.cameras == 0
-        || cfg.cameras > RIG.len()
-        || cfg.width == 0
-        || cfg.height == 0
-    {
-        return Err(format!(
-            "need at least 2 frames, 1 to {} cameras and a non-empty image size (got {} frames, {} cameras, {}×{})",
-            RIG.len(),
-            cfg.frames,
-            cfg.cameras,
-            cfg.width,
-            cfg.height
-        ));
-    }
+/// The world (road, parked cars) and the true vehicle pose of every frame.
+pub fn world_and_poses(cfg: &SynthConfig, progress: Progress) -> (World, Vec<Mat4Rows>) {
     let rng = Rng::new(cfg.seed);
     let road = road_spec(cfg);
     let s0 = cfg.start_s();
@@ -228,6 +242,28 @@ pub fn generate(cfg: &SynthConfig, progress: Progress) -> Result<SynthOutput, St
     let true_poses: Vec<Mat4Rows> = (0..cfg.frames)
         .map(|k| vehicle_pose(&world, s0 + k as f64 * cfg.frame_spacing_m))
         .collect();
+    (world, true_poses)
+}
+
+/// Generates the scene. Deterministic for a config (and independent of thread count).
+pub fn generate(cfg: &SynthConfig, progress: Progress) -> Result<SynthOutput, String> {
+    if cfg.frames < 2
+        || cfg.cameras == 0
+        || cfg.cameras > RIG.len()
+        || cfg.width == 0
+        || cfg.height == 0
+    {
+        return Err(format!(
+            "need at least 2 frames, 1 to {} cameras and a non-empty image size (got {} frames, {} cameras, {}×{})",
+            RIG.len(),
+            cfg.frames,
+            cfg.cameras,
+            cfg.width,
+            cfg.height
+        ));
+    }
+    let rng = Rng::new(cfg.seed);
+    let (world, true_poses) = world_and_poses(cfg, progress);
     let poses = noisy_poses(&true_poses, cfg.noise, &rng);
     let cameras: Vec<Camera> = RIG[..cfg.cameras]
         .iter()

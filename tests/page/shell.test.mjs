@@ -1,58 +1,12 @@
 // Page tests in headless Chromium (WebGPU on SwiftShader): the shell loads, WebGPU is
 // found, dropped / picked / ?url= bundles show their summary or their named problems,
 // and the page keeps working after an error. Screenshots go to target/screenshots/.
-import { test, before, after } from 'node:test';
+import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import fs from 'node:fs';
 import path from 'node:path';
-import { chromium } from 'playwright-core';
-import { createServer } from '../../scripts/serve.mjs';
+import { env, useBrowser, openPage, drop, fixtures, shots } from './harness.mjs';
 
-const root = path.resolve(import.meta.dirname, '../..');
-const fixtures = path.join(root, 'target/page-fixtures');
-const shots = path.join(root, 'target/screenshots');
-const FLAGS = [
-  '--no-sandbox', '--enable-unsafe-webgpu', '--enable-features=Vulkan', '--use-vulkan=swiftshader',
-  '--use-angle=swiftshader', '--no-first-run', '--disable-background-networking',
-  '--disable-component-update', '--disable-sync', '--disable-quic',
-];
-
-let server, browser, base;
-
-before(async () => {
-  fs.mkdirSync(shots, { recursive: true });
-  server = createServer([['/fixtures/', fixtures], ['/demo/', fixtures], ['/', path.join(root, 'www')]]);
-  await new Promise((r) => server.listen(0, '127.0.0.1', r));
-  base = `http://127.0.0.1:${server.address().port}`;
-  browser = await chromium.launch({ executablePath: '/usr/bin/chromium', args: FLAGS });
-});
-
-after(async () => {
-  await browser?.close();
-  server?.close();
-});
-
-async function openPage(query = '') {
-  const page = await browser.newPage({ viewport: { width: 1100, height: 800 } });
-  const errors = [];
-  page.on('pageerror', (e) => errors.push(String(e)));
-  const requests = [];
-  page.on('request', (r) => requests.push(r.url()));
-  await page.goto(`${base}/${query}`);
-  await page.waitForSelector('body[data-gpu-checked="true"]', { timeout: 60_000 });
-  return { page, errors, requests };
-}
-
-async function drop(page, file) {
-  const b64 = fs.readFileSync(path.join(fixtures, file)).toString('base64');
-  const dt = await page.evaluateHandle(({ b64, name }) => {
-    const bytes = Uint8Array.from(atob(b64), (c) => c.charCodeAt(0));
-    const t = new DataTransfer();
-    t.items.add(new File([bytes], name, { type: 'application/zip' }));
-    return t;
-  }, { b64, name: file });
-  await page.dispatchEvent('body', 'drop', { dataTransfer: dt });
-}
+useBrowser();
 
 test('WebGPU is found and the GPU self-test passes', async () => {
   const { page, errors } = await openPage();
@@ -94,7 +48,7 @@ test('a dropped valid bundle shows its summary; an invalid one its named problem
   await page.waitForSelector('#summary:not([hidden])');
   assert.deepEqual(errors, []);
   // No request leaves the page's own origin.
-  assert.ok(requests.every((u) => u.startsWith(base)), requests.join('\n'));
+  assert.ok(requests.every((u) => u.startsWith(env.base)), requests.join('\n'));
   await page.close();
 });
 
@@ -179,7 +133,7 @@ test('the demo optimises in the page; layers, pan, zoom and exports work; errors
   await page.waitForSelector('#summary:not([hidden])');
   assert.deepEqual(errors, []);
   // Only the page's own assets, and the in-memory blobs of the exports.
-  assert.ok(requests.every((u) => u.startsWith(base) || u.startsWith(`blob:${base}`)), requests.join('\n'));
+  assert.ok(requests.every((u) => u.startsWith(env.base) || u.startsWith(`blob:${env.base}`)), requests.join('\n'));
   await page.close();
 });
 

@@ -1,0 +1,56 @@
+// The page tests' harness: a static server for www/ and the fixtures (with range
+// requests), one headless Chromium with WebGPU on SwiftShader, and helpers to open the
+// page and drop a file on it. Screenshots go to target/screenshots/.
+import { before, after } from 'node:test';
+import fs from 'node:fs';
+import path from 'node:path';
+import { chromium } from 'playwright-core';
+import { createServer } from '../../scripts/serve.mjs';
+
+export const root = path.resolve(import.meta.dirname, '../..');
+export const fixtures = path.join(root, 'target/page-fixtures');
+export const shots = path.join(root, 'target/screenshots');
+const FLAGS = [
+  '--no-sandbox', '--enable-unsafe-webgpu', '--enable-features=Vulkan', '--use-vulkan=swiftshader',
+  '--use-angle=swiftshader', '--no-first-run', '--disable-background-networking',
+  '--disable-component-update', '--disable-sync', '--disable-quic',
+];
+
+export const env = { server: null, browser: null, base: '' };
+
+// Registers the file's before/after hooks: the server and the browser.
+export function useBrowser() {
+  before(async () => {
+    fs.mkdirSync(shots, { recursive: true });
+    env.server = createServer([['/fixtures/', fixtures], ['/demo/', fixtures], ['/', path.join(root, 'www')]]);
+    await new Promise((r) => env.server.listen(0, '127.0.0.1', r));
+    env.base = `http://127.0.0.1:${env.server.address().port}`;
+    env.browser = await chromium.launch({ executablePath: '/usr/bin/chromium', args: FLAGS });
+  });
+  after(async () => {
+    await env.browser?.close();
+    env.server?.close();
+  });
+}
+
+export async function openPage(query = '') {
+  const page = await env.browser.newPage({ viewport: { width: 1100, height: 800 } });
+  const errors = [];
+  page.on('pageerror', (e) => errors.push(String(e)));
+  const requests = [];
+  page.on('request', (r) => requests.push(r.url()));
+  await page.goto(`${env.base}/${query}`);
+  await page.waitForSelector('body[data-gpu-checked="true"]', { timeout: 60_000 });
+  return { page, errors, requests };
+}
+
+export async function drop(page, file, name = file) {
+  const b64 = fs.readFileSync(path.join(fixtures, file)).toString('base64');
+  const dt = await page.evaluateHandle(({ b64, name }) => {
+    const bytes = Uint8Array.from(atob(b64), (c) => c.charCodeAt(0));
+    const t = new DataTransfer();
+    t.items.add(new File([bytes], name, { type: 'application/zip' }));
+    return t;
+  }, { b64, name });
+  await page.dispatchEvent('body', 'drop', { dataTransfer: dt });
+}

@@ -13,7 +13,9 @@ export async function openBench(bundle) {
   const base = `http://127.0.0.1:${server.address().port}`;
   const browser = await chromium.launch({
     executablePath: '/usr/bin/chromium',
-    args: ['--no-sandbox', '--enable-unsafe-webgpu', '--enable-features=Vulkan', '--use-vulkan=swiftshader', '--use-angle=swiftshader'],
+    // ROGS_CHROMIUM_FLAGS adds flags (e.g. --disable-accelerated-2d-canvas).
+    args: ['--no-sandbox', '--enable-unsafe-webgpu', '--enable-features=Vulkan', '--use-vulkan=swiftshader', '--use-angle=swiftshader',
+      ...(process.env.ROGS_CHROMIUM_FLAGS || '').split(' ').filter(Boolean)],
   });
   const close = async () => {
     await browser.close();

@@ -18,7 +18,7 @@ use crate::optim::{epoch_order, is_holdout, scene_extent, split_views, TrainConf
 use crate::render::from_bundle::{local_origin, params, view_camera};
 use crate::render::gpu::GpuRasterizer;
 use crate::render::Params;
-use crate::tiles::Tile;
+use crate::tiles::tile::Tile;
 use serde::Serialize;
 use thiserror::Error;
 use web_time::Instant;

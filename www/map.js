@@ -3,6 +3,7 @@
 // layers on a canvas with pan, zoom, visibility and opacity, and offers the exports.
 import { start_reconstruction } from './pkg/rogs.js';
 import { createGpuView } from './gpu-view.js';
+import { openReview, setFrameViewer } from './review.js';
 
 const $ = (id) => document.getElementById(id);
 const LAYERS = ['rgb', 'semantic', 'elevation', 'confidence', 'density', 'error'];
@@ -269,6 +270,24 @@ function showMap(rec, report) {
     });
   });
   ex.append(shown);
+  const names = rec.file_names();
+  if (names.includes('map.rogsmap')) {
+    // The finished map in the review tools; its trajectory frames show this run's
+    // camera views in the panel below.
+    const review = document.createElement('button');
+    review.type = 'button';
+    review.id = 'review-run';
+    review.textContent = 'Review this map';
+    review.addEventListener('click', async () => {
+      const file = new File([rec.file('map.rogsmap')], 'map.rogsmap');
+      setFrameViewer(async (f) => {
+        $('cam-frame').value = String(f);
+        await showCameraView();
+      });
+      await openReview(file, { keepViewer: true });
+    });
+    ex.append(' ', review);
+  }
   showMetrics(report);
   showLegend(report, rec);
   $('cam-frame').max = String(rec.frames() - 1);

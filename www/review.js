@@ -261,7 +261,10 @@ function drawOverlay(g, canvas) {
 export function draw() {
   if (!rv.a) return;
   const canvas = $('review-map');
-  const g = canvas.getContext('2d');
+  // A CPU-backed canvas (willReadFrequently): drawing a few dozen tiles a frame is
+  // then 3× faster where the GPU is emulated (42 against 14 frames per second on
+  // SwiftShader, docs/PERFORMANCE.md), and the inspector's pixel reads are cheap.
+  const g = canvas.getContext('2d', { willReadFrequently: true });
   const t0 = performance.now();
   rv.stats.tilesDrawn = 0;
   g.setTransform(1, 0, 0, 1, 0, 0);
@@ -720,8 +723,10 @@ function resetCaches(which) {
   shownErrors.clear();
 }
 
-// Opens map A (file, blob or URL); `keepView` keeps the URL's view (a shared link).
-export async function openReview(input, { url = null, b = null, query = null } = {}) {
+// Opens map A (a file or a URL) with map B (a URL) if given; `query` restores a shared
+// view; `keepViewer` keeps the optimiser's map and camera panel (a run's own map).
+export async function openReview(input, { url = null, b = null, query = null, keepViewer = false } = {}) {
+  if (!keepViewer) frameViewer = null;
   rv.stats.openedAt = performance.now();
   rv.stats.firstViewMs = null;
   delete $('review-map').dataset.firstViewMs;
@@ -739,7 +744,7 @@ export async function openReview(input, { url = null, b = null, query = null } =
     const mb = await openSource(() => urlSource(b), b);
     if (mb) rv.b = { map: mb, url: b };
   }
-  for (const id of ['summary', 'optimise', 'problems', 'viewer']) $(id).hidden = true;
+  for (const id of ['summary', 'problems', ...(keepViewer ? [] : ['optimise', 'viewer'])]) $(id).hidden = true;
   $('review').hidden = false;
   if (query) applyQuery(query); else { rv.mode = rv.b ? 'swipe' : 'single'; fit(); syncControls(); }
   names();

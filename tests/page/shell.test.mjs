@@ -125,6 +125,21 @@ test('the demo optimises in the page; layers, pan, zoom and exports work; errors
   });
   assert.deepEqual(size.slice(0, 2), size.slice(2));
   assert.ok(size[0] > 10);
+  // The run's own map in review: a frame clicked on its trajectory shows this run's
+  // camera view in the panel.
+  await page.click('#review-run');
+  await page.waitForSelector('#review:not([hidden])');
+  const t = await page.evaluate(() => window.rogsReview.state.a.map.index.trajectory[3]);
+  const [sx, sy] = await page.evaluate(([x, y]) => {
+    const c = document.getElementById('review-map');
+    c.scrollIntoView({ block: 'nearest' });
+    const r = c.getBoundingClientRect();
+    const [a, b] = window.rogsReview.toScreen(x, y);
+    return [r.left + a * (r.width / c.width), r.top + b * (r.height / c.height)];
+  }, t);
+  await page.mouse.click(sx, sy);
+  await page.waitForFunction(() => document.getElementById('review-frame').dataset.frame === '3');
+  assert.equal(await page.inputValue('#cam-frame'), '3');
   // A bad bundle afterwards is named, and the page keeps working.
   await drop(page, 'invalid.zip');
   await page.waitForSelector('#problems:not([hidden])');

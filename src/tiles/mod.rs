@@ -22,6 +22,10 @@
 //! that see it); a view that sees two tiles trains both. Tiles are independent jobs:
 //! the GPU working set is bounded by the largest tile, and a tile can be run apart.
 
+pub mod tile;
+
+pub use tile::Tile;
+
 use crate::bev::BevGeometry;
 use crate::bundle::{Bundle, Manifest};
 use crate::eval::BevRaster;
@@ -63,33 +67,6 @@ pub const DEFAULT_TILE_M: f64 = 96.0;
 pub const DEFAULT_OVERLAP_M: f64 = 4.0;
 /// A drive whose corridor is estimated above this many surfels is tiled by default.
 pub const AUTO_TILE_SURFELS: f64 = 4.0e6;
-
-/// One tile of a plan.
-#[derive(Clone, Debug)]
-pub struct Tile {
-    /// Lattice index (core = [i·size, (i+1)·size) × [j·size, (j+1)·size)).
-    pub id: [i64; 2],
-    pub core: Rect,
-    /// The core widened by the overlap: the surfels this tile trains.
-    pub rect: Rect,
-    /// Frames whose vehicle is near enough to see the rect (LiDAR, colours).
-    pub near_frames: Vec<bool>,
-    /// (frame, view) of every view that sees some of the tile's corridor, sorted.
-    pub views: Vec<(usize, usize)>,
-    /// Scene extent of the tile (the z learning rate's scale), metres.
-    pub extent: f32,
-}
-
-impl Tile {
-    /// `x3_y-2`: used in messages, reports and file names.
-    pub fn name(&self) -> String {
-        format!("x{}_y{}", self.id[0], self.id[1])
-    }
-
-    pub fn sees(&self, frame: usize, view: usize) -> bool {
-        self.views.binary_search(&(frame, view)).is_ok()
-    }
-}
 
 /// The estimated surfel count of a bundle's corridor (path length × width / cell).
 pub fn estimated_surfels(m: &Manifest, cfg: &ReconstructConfig) -> f64 {

@@ -142,8 +142,7 @@ impl Reconstruction {
             .report(&self.bundle, &o, &self.bundle.manifest.name);
         let text = serde_json::to_string_pretty(&r).map_err(err)?;
         files.push(("report.json".into(), text.clone().into_bytes()));
-        let map = crate::export::map_file::write(&o, &self.bundle.manifest, text.as_bytes())
-            .map_err(err)?;
+        let map = crate::export::map_file::write(&o, &self.bundle, text.as_bytes()).map_err(err)?;
         files.push(("map.rogsmap".into(), map));
         self.files.extend(files);
         self.outcome = Some(o);

@@ -56,7 +56,7 @@ fn a_map_file_holds_every_layer_as_a_tile_pyramid_and_damage_is_named() {
     let (b, o) = outcome();
     let g = o.geometry;
     assert!(g.width > TILE, "the map should span several tiles: {g:?}");
-    let map = write(&o, &b.manifest, b"{}").expect("write");
+    let map = write(&o, &b, b"{}").expect("write");
     let s = validate(map.clone(), &Limits::default()).expect("valid map");
     let i = &s.index;
     assert_eq!((i.width, i.height, i.origin), (g.width, g.height, g.origin));
@@ -66,6 +66,8 @@ fn a_map_file_holds_every_layer_as_a_tile_pyramid_and_damage_is_named() {
         "truth gives an error layer"
     );
     assert_eq!(i.trajectory.len(), b.manifest.frames.len());
+    // Thumbnails of the input images: every frame of this short drive, 320 px wide.
+    assert_eq!(i.thumbnails.len(), b.manifest.frames.len());
     let files = entries(&map);
     let get = |p: &str| {
         &files
@@ -74,6 +76,8 @@ fn a_map_file_holds_every_layer_as_a_tile_pyramid_and_damage_is_named() {
             .unwrap_or_else(|| panic!("{p}"))
             .1
     };
+    let thumb = image::load_from_memory(get(&MapIndex::thumbnail_path(3))).expect("jpeg");
+    assert_eq!(thumb.width(), rogs::export::map_file::THUMB_WIDTH);
     // Level 0 reassembled from its tiles is the layer itself.
     let full = rogs::export::layer_rgba(&o, &b.manifest, "rgb").expect("rgb");
     let (tx, ty) = i.tiles(0);

@@ -740,6 +740,7 @@ export async function openReview(input, { url = null, b = null, query = null, ke
   rv.a = { map, url };
   rv.b = null;
   rv.points = []; rv.frame = null; rv.profile = null;
+  $('review-thumb-box').hidden = true;
   if (b) {
     const mb = await openSource(() => urlSource(b), b);
     if (mb) rv.b = { map: mb, url: b };
@@ -791,9 +792,26 @@ async function pickFrame(canvas, sx, sy) {
   if (best < 0) return false;
   rv.frame = best;
   const el = $('review-frame');
-  el.textContent = `Frame ${best} at (${t[best][0].toFixed(2)}, ${t[best][1].toFixed(2)}) m.` + (frameViewer ? '' : ' Open and optimise its bundle to see the camera view beside the input image.');
+  el.textContent = `Frame ${best} at (${t[best][0].toFixed(2)}, ${t[best][1].toFixed(2)}) m.` + (frameViewer ? ' Its camera view is in the camera panel below.' : '');
   el.dataset.frame = String(best);
   if (frameViewer) frameViewer(best);
+  // The stored thumbnail of the input image, when the map file has one near it.
+  const box = $('review-thumb-box');
+  try {
+    const th = await rv.a.map.thumbnail(best);
+    if (th) {
+      const img = $('review-thumb');
+      if (img.src.startsWith('blob:')) URL.revokeObjectURL(img.src);
+      img.src = th.url;
+      img.alt = `input image of frame ${th.frame}, first camera`;
+      $('review-thumb-caption').textContent = `input image, frame ${th.frame} (first camera)` + (th.frame !== best ? `: the stored one nearest to frame ${best}` : '');
+      box.dataset.frame = String(th.frame);
+    }
+    box.hidden = !th;
+  } catch (e) {
+    box.hidden = true;
+    reportTileError(e);
+  }
   requestDraw();
   return true;
 }

@@ -227,6 +227,15 @@ export async function openMap(src) {
       if (b.length !== 4 * w * h) throw new MapError([problem(path, `${b.length} bytes, expected ${4 * w * h} (${w}×${h} float32)`)]);
       return new Float32Array(b.slice().buffer);
     },
+    // The stored thumbnail nearest to `frame` (frames listed in `thumbnails`), as
+    // { frame, url } of a blob URL, or null when the map has none.
+    async thumbnail(frame) {
+      const t = index.thumbnails || [];
+      if (!t.length) return null;
+      const f = t.reduce((best, x) => (Math.abs(x - frame) < Math.abs(best - frame) ? x : best), t[0]);
+      const bytes = await readEntry(src, entries, `thumbs/${String(f).padStart(6, '0')}.jpg`);
+      return { frame: f, url: URL.createObjectURL(new Blob([bytes], { type: 'image/jpeg' })) };
+    },
     async report() {
       try { return JSON.parse(td.decode(await readEntry(src, entries, index.report))); } catch { return null; }
     },

@@ -233,7 +233,7 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
     let mut files = crate::export::files(&o, &b.manifest);
     let report = run.report(&b, &o, &names.join(" + "));
     let report = serde_json::to_vec_pretty(&report).map_err(|e| e.to_string())?;
-    let map = crate::export::map_file::write(&o, &b.manifest, &report)?;
+    let map = crate::export::map_file::write(&o, &b, &report)?;
     files.push(("report.json".into(), report));
     files.push(("map.rogsmap".into(), map));
     write_files(&a.out, &files)?;

@@ -6,7 +6,9 @@
 //! `write` makes one; `read_index` / `validate` check one completely (every tile
 //! present, decoding at its size), naming the entry or field at fault.
 
-use crate::bundle::{BundleErrors, Limits, Manifest, Problem, SemanticClass, Source, ZipSource};
+use crate::bundle::{
+    Bundle, BundleErrors, Limits, Manifest, Problem, SemanticClass, Source, ZipSource,
+};
 use crate::reconstruct::Outcome;
 use serde::{Deserialize, Serialize};
 
@@ -53,6 +55,10 @@ pub struct MapIndex {
     pub present: Option<Vec<String>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stats: Option<MapStats>,
+    /// Frames with a stored thumbnail of their first view's input image:
+    /// `thumbs/{frame:06}.jpg` (optional).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub thumbnails: Vec<usize>,
 }
 
 impl MapIndex {
@@ -92,6 +98,10 @@ impl MapIndex {
 
     pub fn values_path(name: &str, k: u32, c: u32, r: u32) -> String {
         format!("values/{name}/{k}/{c}_{r}.f32")
+    }
+
+    pub fn thumbnail_path(frame: usize) -> String {
+        format!("thumbs/{frame:06}.jpg")
     }
 }
 
@@ -383,6 +393,7 @@ pub fn write_from(
     mut index: MapIndex,
     src: &dyn MapSource,
     report: &[u8],
+    thumbnails: &[(usize, Vec<u8>)],
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Vec<u8>, String> {
     index.levels = level_count(index.width, index.height);
@@ -408,6 +419,9 @@ pub fn write_from(
     };
     w.build(index.levels - 1, 0, 0)?;
     w.zip.add(&index.report, report)?;
+    for (f, jpg) in thumbnails {
+        w.zip.add(&MapIndex::thumbnail_path(*f), jpg)?;
+    }
     let px_m2 = index.resolution * index.resolution;
     let stats = MapStats {
         mapped_m2: w.mapped_px as f64 * px_m2,
@@ -434,6 +448,7 @@ pub fn write_from(
     let mut zip = w.zip;
     index.present = Some(present);
     index.stats = Some(stats);
+    index.thumbnails = thumbnails.iter().map(|t| t.0).collect();
     let json = serde_json::to_vec_pretty(&index).map_err(|e| e.to_string())?;
     zip.add(INDEX, &json)?;
     Ok(zip.finish_raw()?.into_inner())
@@ -494,6 +509,7 @@ pub fn new_index(
         elevation_range: None,
         present: None,
         stats: None,
+        thumbnails: Vec::new(),
     }
 }
 
@@ -505,9 +521,41 @@ pub fn trajectory(m: &Manifest) -> Vec<[f64; 2]> {
         .collect()
 }
 
+/// At most this many frames get a thumbnail, evenly spaced along the drive.
+pub const THUMBNAILS: usize = 120;
+/// Thumbnail width, pixels.
+pub const THUMB_WIDTH: u32 = 320;
+
+/// JPEG thumbnails of the first view of up to `THUMBNAILS` frames, for a reviewer
+/// who clicks the trajectory without the bundle. Images that cannot be read are
+/// skipped (the bundle was validated; a thumbnail is not worth failing a map for).
+pub fn thumbnails(b: &Bundle) -> Vec<(usize, Vec<u8>)> {
+    let frames = &b.manifest.frames;
+    let every = frames.len().div_ceil(THUMBNAILS).max(1);
+    crate::par::par_map(frames.len().div_ceil(every), |i| {
+        let f = i * every;
+        let view = frames[f].views.first()?;
+        let img = image::load_from_memory(&b.read(&view.image).ok()?).ok()?;
+        let h = (img.height() as u64 * THUMB_WIDTH as u64 / img.width().max(1) as u64).max(1);
+        let small = img
+            .resize_exact(THUMB_WIDTH, h as u32, image::imageops::FilterType::Triangle)
+            .to_rgb8();
+        let mut jpg = Vec::new();
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpg, 80)
+            .encode_image(&small)
+            .ok()?;
+        Some((f, jpg))
+    })
+    .into_iter()
+    .flatten()
+    .collect()
+}
+
 /// The map file of a finished run: every layer, and as values the elevation, the
-/// class id, confidence, density and (with truth) the elevation error.
-pub fn write(o: &Outcome, m: &Manifest, report: &[u8]) -> Result<Vec<u8>, String> {
+/// class id, confidence, density and (with truth) the elevation error; thumbnails of
+/// the input images.
+pub fn write(o: &Outcome, b: &Bundle, report: &[u8]) -> Result<Vec<u8>, String> {
+    let m = &b.manifest;
     let g = &o.geometry;
     let layers: Vec<&str> = super::LAYERS
         .iter()
@@ -554,7 +602,7 @@ pub fn write(o: &Outcome, m: &Manifest, report: &[u8]) -> Result<Vec<u8>, String
             .collect(),
         values: values.into_iter().map(|v| v.1).collect(),
     };
-    write_from(index, &src, report, &mut |_, _| {})
+    write_from(index, &src, report, &thumbnails(b), &mut |_, _| {})
 }
 
 fn invalid(field: &str, what: impl Into<String>) -> Problem {
@@ -720,6 +768,23 @@ pub fn validate(bytes: Vec<u8>, limits: &Limits) -> Result<MapSummary, BundleErr
                     }
                 }
             }
+        }
+    }
+    for &f in &index.thumbnails {
+        let path = MapIndex::thumbnail_path(f);
+        match src.read(&path, limits) {
+            Ok(b) => {
+                if let Err(e) = image::load_from_memory_with_format(&b, image::ImageFormat::Jpeg) {
+                    problems.push(Problem::ImageDecode {
+                        path,
+                        reason: e.to_string(),
+                    });
+                }
+            }
+            Err(_) => problems.push(Problem::MissingFile {
+                field: format!("{INDEX}: thumbnails"),
+                path,
+            }),
         }
     }
     if problems.is_empty() {

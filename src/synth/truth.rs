@@ -182,7 +182,7 @@ pub fn map_file(
     };
     let report =
         serde_json::json!({ "truth": true, "resolution_m": res, "half_width_m": half_width });
-    map_file::write_from(index, &src, report.to_string().as_bytes(), progress)
+    map_file::write_from(index, &src, report.to_string().as_bytes(), &[], progress)
 }
 
 /// One truth pixel: colour, class, elevation.

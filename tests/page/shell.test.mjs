@@ -140,6 +140,10 @@ test('the demo optimises in the page; layers, pan, zoom and exports work; errors
   await page.mouse.click(sx, sy);
   await page.waitForFunction(() => document.getElementById('review-frame').dataset.frame === '3');
   assert.equal(await page.inputValue('#cam-frame'), '3');
+  // and the map file's stored thumbnail of that frame's input image.
+  await page.waitForSelector('#review-thumb-box:not([hidden])');
+  assert.equal(await page.getAttribute('#review-thumb-box', 'data-frame'), '3');
+  assert.ok(await page.evaluate(() => document.getElementById('review-thumb').naturalWidth === 320 || new Promise((r) => document.getElementById('review-thumb').onload = () => r(document.getElementById('review-thumb').naturalWidth === 320))));
   // A bad bundle afterwards is named, and the page keeps working.
   await drop(page, 'invalid.zip');
   await page.waitForSelector('#problems:not([hidden])');

@@ -11,6 +11,8 @@ apt_missing=()
 ldconfig -p 2>/dev/null | grep -q 'libvulkan.so.1' || apt_missing+=(libvulkan1)
 command -v chromium >/dev/null || apt_missing+=(chromium)
 command -v chromedriver >/dev/null || apt_missing+=(chromium-driver)
+# GDAL reads our GeoTIFFs back in the tests (a real GIS reader, not our own).
+command -v gdalinfo >/dev/null || apt_missing+=(gdal-bin)
 if [ ${#apt_missing[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ]; then
     say "installing ${apt_missing[*]} (apt)"

@@ -136,7 +136,7 @@ impl Reconstruction {
         let (p, origin) = self.run.model();
         self.files = crate::export::model_files(p, origin);
         let o = o.map_err(err)?;
-        let mut files = crate::export::files(&o, &self.bundle.manifest);
+        let mut files = crate::export::files(&o, &self.bundle.manifest).map_err(err)?;
         let r = self
             .run
             .report(&self.bundle, &o, &self.bundle.manifest.name);

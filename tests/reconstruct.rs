@@ -60,8 +60,9 @@ fn demo_reconstruction_beats_the_ipm_baseline_and_meets_measured_floors() {
     );
     assert!(h.psnr_db > h.ipm_psnr_db, "held-out PSNR {h:?}");
     // Every export decodes with the map's size.
-    let mut files = rogs::export::files(&o, &b.manifest);
+    let mut files = rogs::export::files(&o, &b.manifest).expect("exports");
     files.extend(rogs::export::model_files(&o.params, s.origin));
+    geotiffs_read_by_gdal(&files, &o.geometry);
     let png = files.iter().find(|f| f.0 == "rgb.png").expect("rgb.png");
     let img = image::load_from_memory(&png.1).expect("png");
     assert_eq!(
@@ -205,4 +206,57 @@ fn an_uncaught_gpu_error_becomes_an_error_in_words() {
     });
     let e = c.check().expect_err("the error is recorded, not a panic");
     assert!(e.to_string().starts_with("GPU error"), "{e}");
+}
+
+/// The GeoTIFFs as GDAL reads them: size, georeference, no-data, band layout, and
+/// every elevation equal (bit for bit, NaN where empty) to `elevation.f32`, every
+/// class id to `semantic_ids.png` where the map is valid.
+fn geotiffs_read_by_gdal(files: &[(String, Vec<u8>)], g: &rogs::bev::BevGeometry) {
+    let dir = std::env::temp_dir().join(format!("rogs-gdal-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let get = |n: &str| &files.iter().find(|f| f.0 == n).unwrap_or_else(|| panic!("{n}")).1;
+    for n in ["elevation.tif", "rgb.tif", "semantic.tif"] {
+        std::fs::write(dir.join(n), get(n)).expect("write");
+    }
+    let run = |cmd: &str, args: &[&str]| -> Vec<u8> {
+        let out = std::process::Command::new(cmd)
+            .args(args)
+            .current_dir(&dir)
+            .output()
+            .unwrap_or_else(|e| panic!("{cmd} (gdal-bin, installed by scripts/setup.sh): {e}"));
+        assert!(out.status.success(), "{cmd} {args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        out.stdout
+    };
+    let info = |n: &str| -> serde_json::Value {
+        serde_json::from_slice(&run("gdalinfo", &["-json", n])).expect("gdalinfo json")
+    };
+    let e = info("elevation.tif");
+    assert_eq!(e["size"], serde_json::json!([g.width, g.height]));
+    let gt: Vec<f64> = serde_json::from_value(e["geoTransform"].clone()).expect("geoTransform");
+    let want = [g.origin[0], g.resolution, 0.0, g.origin[1], 0.0, -g.resolution];
+    for (a, b) in gt.iter().zip(want) {
+        assert!((a - b).abs() < 1e-9, "geoTransform {gt:?} vs {want:?}");
+    }
+    let band = &e["bands"][0];
+    assert_eq!(band["type"], "Float32");
+    assert_eq!(band["noDataValue"], "NaN");
+    let rgb = info("rgb.tif");
+    assert_eq!(rgb["bands"].as_array().map(|b| b.len()), Some(4));
+    assert_eq!(rgb["bands"][3]["colorInterpretation"], "Alpha");
+    let sem = info("semantic.tif");
+    assert_eq!(sem["bands"][0]["type"], "Byte");
+    assert_eq!(sem["bands"][0]["noDataValue"], 255.0);
+    // Values: GDAL's raw copy of each against the map's own files.
+    run("gdal_translate", &["-q", "-of", "ENVI", "elevation.tif", "elevation.bin"]);
+    let z = std::fs::read(dir.join("elevation.bin")).expect("elevation.bin");
+    assert_eq!(&z, get("elevation.f32"), "elevation.tif differs from elevation.f32");
+    run("gdal_translate", &["-q", "-of", "ENVI", "semantic.tif", "semantic.bin"]);
+    let ids = std::fs::read(dir.join("semantic.bin")).expect("semantic.bin");
+    let png = image::load_from_memory(get("semantic_ids.png")).expect("png").to_luma8();
+    let valid = image::load_from_memory(get("valid.png")).expect("png").to_luma8();
+    for (i, (&t, p)) in ids.iter().zip(png.pixels()).enumerate() {
+        let v = valid.as_raw()[i] != 0;
+        assert_eq!(t, if v { p.0[0] } else { 255 }, "class id at pixel {i}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }

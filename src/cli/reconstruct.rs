@@ -230,7 +230,7 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
             a.out.join("surfels.ply").display()
         )
     })?;
-    let mut files = crate::export::files(&o, &b.manifest);
+    let mut files = crate::export::files(&o, &b.manifest)?;
     let report = run.report(&b, &o, &names.join(" + "));
     let report = serde_json::to_vec_pretty(&report).map_err(|e| e.to_string())?;
     let map = crate::export::map_file::write(&o, &b, &report)?;

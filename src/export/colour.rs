@@ -67,19 +67,10 @@ pub fn draw_text(img: &mut image::RgbImage, x: u32, y: u32, text: &str, scale: u
     }
 }
 
-/// A float layer as a colour-mapped image between `lo` and `hi`, with a legend strip
-/// below it (the ramp, and the two end values in `unit` at each end). NaN is black.
-pub fn mapped_with_legend(
-    v: &[f32],
-    w: u32,
-    h: u32,
-    lo: f32,
-    hi: f32,
-    label: &dyn Fn(f32) -> String,
-) -> image::RgbImage {
-    let scale = (w / 200).clamp(1, 4);
-    let strip = 12 * scale;
-    let mut img = image::RgbImage::new(w, h + strip);
+/// A float layer as a colour-mapped image between `lo` and `hi`, of the map's exact
+/// size (so that it overlays the other layers). NaN is black.
+pub fn mapped(v: &[f32], w: u32, h: u32, lo: f32, hi: f32) -> image::RgbImage {
+    let mut img = image::RgbImage::new(w, h);
     let span = (hi - lo).max(1e-6);
     for (i, &z) in v.iter().enumerate() {
         let c = if z.is_finite() {
@@ -89,20 +80,28 @@ pub fn mapped_with_legend(
         };
         img.put_pixel(i as u32 % w, i as u32 / w, image::Rgb(c));
     }
+    img
+}
+
+/// The legend of a `mapped` layer, its own image: the ramp over `w` pixels and the two
+/// end values (`label(lo)`, `label(hi)`) below it.
+pub fn legend(w: u32, lo: f32, hi: f32, label: &dyn Fn(f32) -> String) -> image::RgbImage {
+    let scale = (w / 200).clamp(1, 4);
+    let mut img = image::RgbImage::new(w, 12 * scale);
     for x in 0..w {
         let c = ramp(x as f32 / (w.max(2) - 1) as f32);
-        for y in h..h + 4 * scale {
+        for y in 0..4 * scale {
             img.put_pixel(x, y, image::Rgb(c));
         }
     }
     let white = [255, 255, 255];
-    draw_text(&mut img, 1, h + 5 * scale, &label(lo), scale, white);
+    draw_text(&mut img, 1, 5 * scale, &label(lo), scale, white);
     let right = label(hi);
     let tw = right.chars().count() as u32 * 4 * scale;
     draw_text(
         &mut img,
         w.saturating_sub(tw + 1),
-        h + 5 * scale,
+        5 * scale,
         &right,
         scale,
         white,

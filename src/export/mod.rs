@@ -2,6 +2,7 @@
 //! writes them to a folder and the page offers them as downloads, identically.
 
 pub mod colour;
+pub mod geotiff;
 pub mod map_file;
 pub mod ply;
 
@@ -9,7 +10,7 @@ use crate::bev::BevGeometry;
 use crate::bundle::Manifest;
 use crate::reconstruct::Outcome;
 use crate::render::Params;
-use colour::mapped_with_legend;
+use colour::{legend, mapped};
 use image::{GrayImage, RgbImage};
 
 fn png(img: &image::DynamicImage) -> Vec<u8> {
@@ -128,7 +129,7 @@ pub fn model_files(p: &Params<f32>, origin: [f64; 3]) -> Vec<(String, Vec<u8>)> 
 
 /// The map's files (BEV layers and their geometry); with `model_files` and the report,
 /// every output of a run.
-pub fn files(o: &Outcome, m: &Manifest) -> Vec<(String, Vec<u8>)> {
+pub fn files(o: &Outcome, m: &Manifest) -> Result<Vec<(String, Vec<u8>)>, String> {
     let g: &BevGeometry = &o.geometry;
     let (w, h) = (g.width, g.height);
     let r = &o.raster;
@@ -143,9 +144,10 @@ pub fn files(o: &Outcome, m: &Manifest) -> Vec<(String, Vec<u8>)> {
     ];
     let z = elevation(o);
     let (lo, hi) = range(&z);
+    out.push(("elevation.png".into(), png(&mapped(&z, w, h, lo, hi).into())));
     out.push((
-        "elevation.png".into(),
-        png(&mapped_with_legend(&z, w, h, lo, hi, &|v| format!("{v:.2}m")).into()),
+        "elevation_legend.png".into(),
+        png(&legend(LEGEND_WIDTH, lo, hi, &|v| format!("{v:.2}m")).into()),
     ));
     out.push(("elevation.npy".into(), npy(&z, w, h)));
     out.push((
@@ -168,12 +170,46 @@ pub fn files(o: &Outcome, m: &Manifest) -> Vec<(String, Vec<u8>)> {
     ));
     out.push(("density.png".into(), png(&grey(&o.density, w, h).into())));
     if let Some(e) = elevation_error(o) {
+        out.push(("error.png".into(), png(&mapped(&e, w, h, 0.0, 0.1).into())));
         out.push((
-            "error.png".into(),
-            png(&mapped_with_legend(&e, w, h, 0.0, 0.1, &|v| format!("{:.0}cm", v * 100.0)).into()),
+            "error_legend.png".into(),
+            png(&legend(LEGEND_WIDTH, 0.0, 0.1, &|v| format!("{:.0}cm", v * 100.0)).into()),
         ));
     }
-    out
+    out.extend(geotiffs(o, m, &z)?);
+    Ok(out)
+}
+
+/// Width of the legend images, pixels.
+const LEGEND_WIDTH: u32 = 400;
+
+/// `elevation.tif`, `rgb.tif` and `semantic.tif` (docs/OUTPUTS.md).
+fn geotiffs(o: &Outcome, m: &Manifest, z: &[f32]) -> Result<Vec<(String, Vec<u8>)>, String> {
+    let g = &o.geometry;
+    let frame = &m.name;
+    let r = &o.raster;
+    let ids: Vec<u8> = r
+        .class_ids
+        .as_raw()
+        .iter()
+        .zip(r.valid.as_raw())
+        .map(|(&c, &v)| if v != 0 { c } else { geotiff::SEMANTIC_NODATA })
+        .collect();
+    let rgba = layer_rgba(o, m, "rgb").unwrap_or_default();
+    Ok(vec![
+        (
+            "elevation.tif".into(),
+            geotiff::float_tif("elevation.tif", z, g, frame)?,
+        ),
+        (
+            "rgb.tif".into(),
+            geotiff::rgba_tif("rgb.tif", &rgba, g, frame)?,
+        ),
+        (
+            "semantic.tif".into(),
+            geotiff::ids_tif("semantic.tif", &ids, g, frame)?,
+        ),
+    ])
 }
 
 /// Values through the colour ramp from `lo` to `hi`, as RGBA (transparent where NaN).

@@ -1,0 +1,120 @@
+//! GeoTIFF layers for GIS tools (QGIS, GDAL): `elevation.tif` (float32 metres, NaN
+//! no-data where the map is empty), `rgb.tif` (RGBA, alpha 0 where empty) and
+//! `semantic.tif` (class ids, 255 no-data), each exactly the map's size, with the
+//! georeference as GeoTIFF tags: the upper-left corner of pixel (0, 0) tied to the
+//! map's origin (west edge, north edge), square pixels of the map's resolution, and a
+//! user-defined (local engineering) model, named in the citation, because a bundle's
+//! world frame has no CRS.
+
+use crate::bev::BevGeometry;
+use std::io::Cursor;
+use tiff::encoder::{colortype, compression::DeflateLevel, Compression, TiffEncoder};
+use tiff::tags::Tag;
+
+/// GeoTIFF tag numbers (GeoTIFF 1.1, and GDAL's no-data tag).
+const MODEL_PIXEL_SCALE: u16 = 33550;
+const MODEL_TIEPOINT: u16 = 33922;
+const GEO_KEY_DIRECTORY: u16 = 34735;
+const GEO_ASCII_PARAMS: u16 = 34737;
+const GDAL_NODATA: u16 = 42113;
+/// `ExtraSamples` = 2: the fourth sample is unassociated alpha.
+const EXTRA_SAMPLES: u16 = 338;
+
+/// Class id written where the map is empty.
+pub const SEMANTIC_NODATA: u8 = 255;
+
+/// The georeference tags of a map of geometry `g` in the frame named `frame`.
+fn georeference<W: std::io::Write + std::io::Seek, C: colortype::ColorType>(
+    img: &mut tiff::encoder::ImageEncoder<'_, W, C, tiff::encoder::TiffKindStandard>,
+    g: &BevGeometry,
+    frame: &str,
+) -> tiff::TiffResult<()> {
+    let e = img.encoder();
+    e.write_tag(
+        Tag::Unknown(MODEL_PIXEL_SCALE),
+        &[g.resolution, g.resolution, 0.0][..],
+    )?;
+    e.write_tag(
+        Tag::Unknown(MODEL_TIEPOINT),
+        &[0.0, 0.0, 0.0, g.origin[0], g.origin[1], 0.0][..],
+    )?;
+    let citation = format!("rogs local frame: {frame}|");
+    // Version 1.1.0, 3 keys: GTModelType user-defined, GTRasterType PixelIsArea,
+    // GTCitation (from the ASCII parameters).
+    let keys: [u16; 16] = [
+        1,
+        1,
+        0,
+        3,
+        1024,
+        0,
+        1,
+        32767,
+        1025,
+        0,
+        1,
+        1,
+        1026,
+        GEO_ASCII_PARAMS,
+        citation.len() as u16,
+        0,
+    ];
+    e.write_tag(Tag::Unknown(GEO_KEY_DIRECTORY), &keys[..])?;
+    e.write_tag(Tag::Unknown(GEO_ASCII_PARAMS), citation.as_str())?;
+    Ok(())
+}
+
+fn err(name: &str) -> impl Fn(tiff::TiffError) -> String + '_ {
+    move |e| format!("{name}: {e}")
+}
+
+/// Float32 elevation (or any value layer), NaN where empty.
+pub fn float_tif(name: &str, v: &[f32], g: &BevGeometry, frame: &str) -> Result<Vec<u8>, String> {
+    let mut out = Cursor::new(Vec::new());
+    let mut enc = TiffEncoder::new(&mut out)
+        .map_err(err(name))?
+        .with_compression(Compression::Deflate(DeflateLevel::Balanced));
+    let mut img = enc
+        .new_image::<colortype::Gray32Float>(g.width, g.height)
+        .map_err(err(name))?;
+    georeference(&mut img, g, frame).map_err(err(name))?;
+    img.encoder()
+        .write_tag(Tag::Unknown(GDAL_NODATA), "nan")
+        .map_err(err(name))?;
+    img.write_data(v).map_err(err(name))?;
+    Ok(out.into_inner())
+}
+
+/// RGBA colours, alpha 0 where empty.
+pub fn rgba_tif(name: &str, px: &[u8], g: &BevGeometry, frame: &str) -> Result<Vec<u8>, String> {
+    let mut out = Cursor::new(Vec::new());
+    let mut enc = TiffEncoder::new(&mut out)
+        .map_err(err(name))?
+        .with_compression(Compression::Deflate(DeflateLevel::Balanced));
+    let mut img = enc
+        .new_image::<colortype::RGBA8>(g.width, g.height)
+        .map_err(err(name))?;
+    georeference(&mut img, g, frame).map_err(err(name))?;
+    img.encoder()
+        .write_tag(Tag::Unknown(EXTRA_SAMPLES), &[2u16][..])
+        .map_err(err(name))?;
+    img.write_data(px).map_err(err(name))?;
+    Ok(out.into_inner())
+}
+
+/// Class ids, `SEMANTIC_NODATA` where empty.
+pub fn ids_tif(name: &str, ids: &[u8], g: &BevGeometry, frame: &str) -> Result<Vec<u8>, String> {
+    let mut out = Cursor::new(Vec::new());
+    let mut enc = TiffEncoder::new(&mut out)
+        .map_err(err(name))?
+        .with_compression(Compression::Deflate(DeflateLevel::Balanced));
+    let mut img = enc
+        .new_image::<colortype::Gray8>(g.width, g.height)
+        .map_err(err(name))?;
+    georeference(&mut img, g, frame).map_err(err(name))?;
+    img.encoder()
+        .write_tag(Tag::Unknown(GDAL_NODATA), SEMANTIC_NODATA.to_string().as_str())
+        .map_err(err(name))?;
+    img.write_data(ids).map_err(err(name))?;
+    Ok(out.into_inner())
+}

@@ -5,7 +5,9 @@
 //! levels), `raised.rogsmap` (the same with every elevation 3 cm higher, as map B),
 //! `big.rogsmap` (1.7 km of highway at 10 cm: 17 000 px, wider than a texture may
 //! be), `bad-format.rogsmap` and `truncated.rogsmap` (damaged), and `points.json`
-//! (world points on the road with their level-0 elevation, read natively).
+//! (world points on the road with their level-0 elevation, read natively), and
+//! `splats-z.ply`, `splats-y.ply`, `splats-semantic.ply` with `splats.json` (the
+//! surfels they hold, for a real splat reader to be checked against).
 //! Usage: `cargo run --example page_fixtures -- OUT_DIR`.
 
 use rogs::bundle::example::{self, png_gray};
@@ -42,6 +44,7 @@ fn main() -> Result<(), String> {
     )
     .map_err(|e| e.to_string())?;
     maps(&out)?;
+    splats(&out)?;
     eprintln!(
         "wrote {}/valid.zip, invalid.zip, demo.zip and the map files",
         out.display()
@@ -160,4 +163,56 @@ fn maps(out: &std::path::Path) -> Result<(), String> {
         &mut |_, _| {},
     )?;
     write("big.rogsmap", &big)
+}
+
+/// Six surfels with distinct positions, colours, scales, opacities, rotations and
+/// classes, written as PLY with z up, with y up, and in class colours.
+fn splats(out: &std::path::Path) -> Result<(), String> {
+    use rogs::export::ply::{surfels_ply, Up};
+    let n = 6;
+    let channels = 3;
+    let p = rogs::render::Params::<f32> {
+        pos: (0..n)
+            .map(|i| [i as f32 * 1.5 - 2.0, 0.5 * i as f32, 0.1 * i as f32 - 0.2])
+            .collect(),
+        rgb: (0..n)
+            .map(|i| [0.1 + 0.15 * i as f32, 0.8 - 0.1 * i as f32, 0.5])
+            .collect(),
+        log_scale: (0..n).map(|i| [-2.0 - 0.1 * i as f32, -2.5]).collect(),
+        opacity: (0..n).map(|i| -1.0 + 0.5 * i as f32).collect(),
+        rotation: (0..n)
+            .map(|i| {
+                let a = 0.3 * i as f32;
+                [(a / 2.0).cos(), 0.1, 0.05 * i as f32, (a / 2.0).sin()]
+            })
+            .collect(),
+        logits: (0..n * channels)
+            .map(|k| {
+                if k % channels == (k / channels) % channels {
+                    3.0
+                } else {
+                    0.0
+                }
+            })
+            .collect(),
+        channels,
+    };
+    let origin = [100.0, -50.0, 2.0];
+    let colours: Vec<[u8; 3]> = (0..n)
+        .map(|i| [[200, 10, 10], [10, 200, 10], [10, 10, 200]][i % 3])
+        .collect();
+    let write = |name: &str, bytes: &[u8]| {
+        std::fs::write(out.join(name), bytes).map_err(|e| format!("{name}: {e}"))
+    };
+    write("splats-z.ply", &surfels_ply(&p, origin, Up::Z, None))?;
+    write("splats-y.ply", &surfels_ply(&p, origin, Up::Y, None))?;
+    write(
+        "splats-semantic.ply",
+        &surfels_ply(&p, origin, Up::Z, Some(&colours)),
+    )?;
+    let json = serde_json::json!({
+        "pos": p.pos, "rgb": p.rgb, "log_scale": p.log_scale, "opacity": p.opacity,
+        "rotation": p.rotation, "class_colours": colours, "origin": origin,
+    });
+    write("splats.json", json.to_string().as_bytes())
 }

@@ -41,7 +41,7 @@ if ! wasm-bindgen --version 2>/dev/null | grep -q ' 0.2.130'; then
   say "installing wasm-bindgen-cli 0.2.130 (about 5 minutes, once)"
   cargo install wasm-bindgen-cli --version 0.2.130 --force
 fi
-if [ ! -d node_modules/playwright-core ]; then
+if [ ! -d node_modules/playwright-core ] || [ ! -d node_modules/@playcanvas/splat-transform ]; then
   say "installing npm packages"
   npm ci --no-audit --no-fund
 fi

@@ -28,6 +28,8 @@ struct Settings {
     /// Tile side in metres (none: untiled unless the drive is large).
     tile_m: Option<f64>,
     tile_overlap_m: Option<f64>,
+    /// Up axis of the exported PLY files: "z" (world) or "y" (splat viewers).
+    ply_up: Option<String>,
 }
 
 #[wasm_bindgen]
@@ -38,6 +40,7 @@ pub struct Reconstruction {
     geometry: BevGeometry,
     outcome: Option<Outcome>,
     files: Vec<(String, Vec<u8>)>,
+    ply_up: crate::export::ply::Up,
 }
 
 /// Opens a bundle, prepares the surfels and uploads them to the GPU.
@@ -50,6 +53,10 @@ pub async fn start_reconstruction(
         Settings::default()
     } else {
         serde_wasm_bindgen::from_value(settings).map_err(err)?
+    };
+    let ply_up = match s.ply_up.as_deref() {
+        None => crate::export::ply::Up::Z,
+        Some(u) => u.parse().map_err(err)?,
     };
     let mut bundle = Bundle::from_zip_bytes(bytes, Limits::default()).map_err(err)?;
     let mut c = ReconstructConfig::default();
@@ -94,6 +101,7 @@ pub async fn start_reconstruction(
         geometry,
         outcome: None,
         files: Vec::new(),
+        ply_up,
     })
 }
 
@@ -134,7 +142,7 @@ impl Reconstruction {
         let o = self.run.finish(&self.bundle, &mut |_, _| {}).await;
         // Kept for export even if the BEV failed.
         let (p, origin) = self.run.model();
-        self.files = crate::export::model_files(p, origin);
+        self.files = crate::export::model_files(p, origin, &self.bundle.manifest, self.ply_up);
         let o = o.map_err(err)?;
         let mut files = crate::export::files(&o, &self.bundle.manifest).map_err(err)?;
         let r = self

@@ -61,7 +61,12 @@ fn demo_reconstruction_beats_the_ipm_baseline_and_meets_measured_floors() {
     assert!(h.psnr_db > h.ipm_psnr_db, "held-out PSNR {h:?}");
     // Every export decodes with the map's size.
     let mut files = rogs::export::files(&o, &b.manifest).expect("exports");
-    files.extend(rogs::export::model_files(&o.params, s.origin));
+    files.extend(rogs::export::model_files(
+        &o.params,
+        s.origin,
+        &b.manifest,
+        rogs::export::ply::Up::Z,
+    ));
     geotiffs_read_by_gdal(&files, &o.geometry);
     let png = files.iter().find(|f| f.0 == "rgb.png").expect("rgb.png");
     let img = image::load_from_memory(&png.1).expect("png");
@@ -214,7 +219,13 @@ fn an_uncaught_gpu_error_becomes_an_error_in_words() {
 fn geotiffs_read_by_gdal(files: &[(String, Vec<u8>)], g: &rogs::bev::BevGeometry) {
     let dir = std::env::temp_dir().join(format!("rogs-gdal-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
-    let get = |n: &str| &files.iter().find(|f| f.0 == n).unwrap_or_else(|| panic!("{n}")).1;
+    let get = |n: &str| {
+        &files
+            .iter()
+            .find(|f| f.0 == n)
+            .unwrap_or_else(|| panic!("{n}"))
+            .1
+    };
     for n in ["elevation.tif", "rgb.tif", "semantic.tif"] {
         std::fs::write(dir.join(n), get(n)).expect("write");
     }
@@ -224,7 +235,11 @@ fn geotiffs_read_by_gdal(files: &[(String, Vec<u8>)], g: &rogs::bev::BevGeometry
             .current_dir(&dir)
             .output()
             .unwrap_or_else(|e| panic!("{cmd} (gdal-bin, installed by scripts/setup.sh): {e}"));
-        assert!(out.status.success(), "{cmd} {args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        assert!(
+            out.status.success(),
+            "{cmd} {args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
         out.stdout
     };
     let info = |n: &str| -> serde_json::Value {
@@ -233,7 +248,14 @@ fn geotiffs_read_by_gdal(files: &[(String, Vec<u8>)], g: &rogs::bev::BevGeometry
     let e = info("elevation.tif");
     assert_eq!(e["size"], serde_json::json!([g.width, g.height]));
     let gt: Vec<f64> = serde_json::from_value(e["geoTransform"].clone()).expect("geoTransform");
-    let want = [g.origin[0], g.resolution, 0.0, g.origin[1], 0.0, -g.resolution];
+    let want = [
+        g.origin[0],
+        g.resolution,
+        0.0,
+        g.origin[1],
+        0.0,
+        -g.resolution,
+    ];
     for (a, b) in gt.iter().zip(want) {
         assert!((a - b).abs() < 1e-9, "geoTransform {gt:?} vs {want:?}");
     }
@@ -247,13 +269,27 @@ fn geotiffs_read_by_gdal(files: &[(String, Vec<u8>)], g: &rogs::bev::BevGeometry
     assert_eq!(sem["bands"][0]["type"], "Byte");
     assert_eq!(sem["bands"][0]["noDataValue"], 255.0);
     // Values: GDAL's raw copy of each against the map's own files.
-    run("gdal_translate", &["-q", "-of", "ENVI", "elevation.tif", "elevation.bin"]);
+    run(
+        "gdal_translate",
+        &["-q", "-of", "ENVI", "elevation.tif", "elevation.bin"],
+    );
     let z = std::fs::read(dir.join("elevation.bin")).expect("elevation.bin");
-    assert_eq!(&z, get("elevation.f32"), "elevation.tif differs from elevation.f32");
-    run("gdal_translate", &["-q", "-of", "ENVI", "semantic.tif", "semantic.bin"]);
+    assert_eq!(
+        &z,
+        get("elevation.f32"),
+        "elevation.tif differs from elevation.f32"
+    );
+    run(
+        "gdal_translate",
+        &["-q", "-of", "ENVI", "semantic.tif", "semantic.bin"],
+    );
     let ids = std::fs::read(dir.join("semantic.bin")).expect("semantic.bin");
-    let png = image::load_from_memory(get("semantic_ids.png")).expect("png").to_luma8();
-    let valid = image::load_from_memory(get("valid.png")).expect("png").to_luma8();
+    let png = image::load_from_memory(get("semantic_ids.png"))
+        .expect("png")
+        .to_luma8();
+    let valid = image::load_from_memory(get("valid.png"))
+        .expect("png")
+        .to_luma8();
     for (i, (&t, p)) in ids.iter().zip(png.pixels()).enumerate() {
         let v = valid.as_raw()[i] != 0;
         assert_eq!(t, if v { p.0[0] } else { 255 }, "class id at pixel {i}");

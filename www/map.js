@@ -31,6 +31,7 @@ function settings() {
     adaptive: $('set-adaptive').checked,
     init: $('set-init').value,
     half_width: Number($('set-half-width').value) || 4,
+    ply_up: $('set-ply-up').value,
     ...(Number($('set-tile').value) > 0 ? { tile_m: Number($('set-tile').value) } : {}),
   };
 }

@@ -290,7 +290,8 @@ export function draw() {
 }
 
 // ---- difference layers and the overlap summary --------------------------------------
-const RAMP = [[48, 18, 59], [70, 134, 251], [27, 229, 181], [164, 252, 60], [251, 185, 56], [122, 4, 3]];
+// Viridis at six stops, as the engine's ramp (src/export/colour.rs).
+const RAMP = [[68, 1, 84], [65, 68, 135], [42, 120, 142], [34, 168, 132], [122, 209, 81], [253, 231, 37]];
 export function ramp(t) {
   const x = Math.min(1, Math.max(0, Number.isFinite(t) ? t : 0)) * (RAMP.length - 1);
   const i = Math.min(RAMP.length - 2, Math.floor(x)), f = x - i;

@@ -81,11 +81,13 @@ enum Command {
     /// Prepares the surfel grid along the trajectory, colours it from the best
     /// training views (the IPM baseline), optimises it on the GPU for the requested
     /// epochs, renders the BEV layers and scores them against the bundle's truth or
-    /// LiDAR when present. Writes to --out: rgb.png, semantic.png, semantic_ids.png,
-    /// elevation.png (with legend), elevation.npy / elevation.f32 with bev.json
-    /// (georeference), confidence.png, density.png, error.png (with truth),
-    /// surfels.ply, surfel_centres.f32 (these two as soon as training ends, before the
-    /// BEV) and report.json. A NaN during optimisation stops it, keeps the
+    /// LiDAR when present. Writes to --out (docs/OUTPUTS.md): rgb.png, semantic.png,
+    /// semantic_ids.png, elevation.png and elevation_legend.png, elevation.npy /
+    /// elevation.f32 with bev.json (georeference), GeoTIFFs elevation.tif, rgb.tif and
+    /// semantic.tif, confidence.png, density.png, error.png (with truth),
+    /// map.rogsmap (the map file for review), surfels.ply, surfels_semantic.ply and
+    /// surfel_centres.f32 (these three as soon as training ends, before the BEV) and
+    /// report.json. A NaN during optimisation stops it, keeps the
     /// last good model, still writes the outputs and exits non-zero.
     Reconstruct(reconstruct::Args),
 }

@@ -102,6 +102,10 @@ pub struct Args {
     /// tiles' layers are blended over twice this width.
     #[arg(long, default_value_t = DEFAULT_OVERLAP_M, value_parser = non_negative_m64)]
     tile_overlap_m: f64,
+    /// Up axis of surfels.ply and surfels_semantic.ply: z keeps the map's world frame
+    /// (x east, y north, z up); y rotates them for splat viewers that expect y up.
+    #[arg(long, default_value = "z")]
+    ply_up: crate::export::ply::Up,
 }
 
 fn config(a: &Args) -> ReconstructConfig {
@@ -222,7 +226,7 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
     bar.finish();
     // The model is written whatever happened to the BEV: training is never lost.
     let (p, origin) = run.model();
-    let model = crate::export::model_files(p, origin);
+    let model = crate::export::model_files(p, origin, &b.manifest, a.ply_up);
     write_files(&a.out, &model)?;
     let o = outcome.map_err(|e| {
         format!(

@@ -1,26 +1,16 @@
 //! Colour maps and a tiny bitmap font for legends.
 
-/// Turbo-like colour map (blue → cyan → green → yellow → red) for t in 0..1, as a
-/// piecewise-linear ramp through fixed stops (a readable, colour-blind-safer scale
-/// than a rainbow, and simple enough to reproduce in the page).
+/// The viridis colour map (dark blue → green → yellow) for t in 0..1, from the
+/// `colorous` crate: perceptually uniform and readable with the common forms of colour
+/// blindness. The page's legends and its difference layers use the same stops.
 pub fn ramp(t: f32) -> [u8; 3] {
-    const STOPS: [[f32; 3]; 6] = [
-        [48.0, 18.0, 59.0],
-        [70.0, 134.0, 251.0],
-        [27.0, 229.0, 181.0],
-        [164.0, 252.0, 60.0],
-        [251.0, 185.0, 56.0],
-        [122.0, 4.0, 3.0],
-    ];
     let t = if t.is_finite() {
         t.clamp(0.0, 1.0)
     } else {
         0.0
     };
-    let x = t * (STOPS.len() - 1) as f32;
-    let i = (x.floor() as usize).min(STOPS.len() - 2);
-    let f = x - i as f32;
-    [0, 1, 2].map(|c| (STOPS[i][c] * (1.0 - f) + STOPS[i + 1][c] * f).round() as u8)
+    let c = colorous::VIRIDIS.eval_continuous(t as f64);
+    [c.r, c.g, c.b]
 }
 
 /// 3×5 glyphs for digits, '.', '-', ' ', 'm' and 'c' (rows top to bottom, 3 bits each).

@@ -113,7 +113,10 @@ pub fn ids_tif(name: &str, ids: &[u8], g: &BevGeometry, frame: &str) -> Result<V
         .map_err(err(name))?;
     georeference(&mut img, g, frame).map_err(err(name))?;
     img.encoder()
-        .write_tag(Tag::Unknown(GDAL_NODATA), SEMANTIC_NODATA.to_string().as_str())
+        .write_tag(
+            Tag::Unknown(GDAL_NODATA),
+            SEMANTIC_NODATA.to_string().as_str(),
+        )
         .map_err(err(name))?;
     img.write_data(ids).map_err(err(name))?;
     Ok(out.into_inner())

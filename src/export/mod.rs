@@ -114,16 +114,36 @@ pub fn elevation_error(o: &Outcome) -> Option<Vec<f32>> {
 
 /// The model's own files (surfels.ply and surfel_centres.f32), which need no BEV: the
 /// CLI writes them as soon as training ends.
-pub fn model_files(p: &Params<f32>, origin: [f64; 3]) -> Vec<(String, Vec<u8>)> {
+pub fn model_files(
+    p: &Params<f32>,
+    origin: [f64; 3],
+    m: &Manifest,
+    up: ply::Up,
+) -> Vec<(String, Vec<u8>)> {
     let centres: Vec<u8> = p
         .pos
         .iter()
         .flat_map(|p| [0, 1, 2].map(|k| ((p[k] as f64 + origin[k]) as f32).to_le_bytes()))
         .flatten()
         .collect();
+    // Each surfel in the colour of its most likely class (channel k is class k of the
+    // table).
+    let classes: Vec<[u8; 3]> = (0..p.len())
+        .map(|i| {
+            let l = &p.logits[i * p.channels..(i + 1) * p.channels];
+            let k = (0..l.len())
+                .max_by(|&a, &b| l[a].total_cmp(&l[b]))
+                .unwrap_or(0);
+            m.semantic_classes.get(k).map_or([0, 0, 0], |c| c.color)
+        })
+        .collect();
     vec![
         ("surfel_centres.f32".into(), centres),
-        ("surfels.ply".into(), ply::surfels_ply(p, origin)),
+        ("surfels.ply".into(), ply::surfels_ply(p, origin, up, None)),
+        (
+            "surfels_semantic.ply".into(),
+            ply::surfels_ply(p, origin, up, Some(&classes)),
+        ),
     ]
 }
 
@@ -144,7 +164,10 @@ pub fn files(o: &Outcome, m: &Manifest) -> Result<Vec<(String, Vec<u8>)>, String
     ];
     let z = elevation(o);
     let (lo, hi) = range(&z);
-    out.push(("elevation.png".into(), png(&mapped(&z, w, h, lo, hi).into())));
+    out.push((
+        "elevation.png".into(),
+        png(&mapped(&z, w, h, lo, hi).into()),
+    ));
     out.push((
         "elevation_legend.png".into(),
         png(&legend(LEGEND_WIDTH, lo, hi, &|v| format!("{v:.2}m")).into()),

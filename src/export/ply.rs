@@ -9,14 +9,55 @@ const C0: f32 = 0.282_094_8;
 /// log of the normal-axis scale written for flat surfels (0.1 mm).
 const FLAT_LOG_SCALE: f32 = -9.21;
 
-/// PLY bytes of `p`; positions are local (world − `origin`), recorded in a comment.
-pub fn surfels_ply(p: &Params<f32>, origin: [f64; 3]) -> Vec<u8> {
+/// Which axis is up in a written PLY.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Up {
+    /// The world frame as it is: x east, y north, z up (GIS tools, the map's frame).
+    #[default]
+    Z,
+    /// Rotated −90° about x for splat viewers that expect y up: (x, y, z) → (x, z, −y).
+    Y,
+}
+
+impl std::str::FromStr for Up {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "z" => Ok(Up::Z),
+            "y" => Ok(Up::Y),
+            _ => Err(format!("unknown up axis {s:?}; expected z or y")),
+        }
+    }
+}
+
+/// Rotates a vector from the world frame into the written frame.
+fn turn(up: Up, v: [f32; 3]) -> [f32; 3] {
+    match up {
+        Up::Z => v,
+        Up::Y => [v[0], v[2], -v[1]],
+    }
+}
+
+/// PLY bytes of `p`; positions are local (world − `origin`), recorded in a comment with
+/// the up axis. `colours`: one RGB per surfel instead of the learnt colours (the class
+/// colours of `surfels_semantic.ply`).
+pub fn surfels_ply(
+    p: &Params<f32>,
+    origin: [f64; 3],
+    up: Up,
+    colours: Option<&[[u8; 3]]>,
+) -> Vec<u8> {
     let props = [
         "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0",
         "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3",
     ];
+    let axes = match up {
+        Up::Z => "comment up z: x east, y north, z up (the map's world frame)".to_string(),
+        Up::Y => "comment up y: written (x, y, z) = world (x, z, -y), rotated -90 degrees about x"
+            .to_string(),
+    };
     let mut head = format!(
-        "ply\nformat binary_little_endian 1.0\ncomment rogs surfels; world = local + origin {} {} {}\nelement vertex {}\n",
+        "ply\nformat binary_little_endian 1.0\ncomment rogs surfels; world = local + origin {} {} {}\n{axes}\nelement vertex {}\n",
         origin[0], origin[1], origin[2], p.len()
     );
     for name in props {
@@ -29,16 +70,29 @@ pub fn surfels_ply(p: &Params<f32>, origin: [f64; 3]) -> Vec<u8> {
         let q = p.rotation[i];
         let norm = (q.iter().map(|v| v * v).sum::<f32>()).sqrt().max(1e-12);
         let [w, x, y, z] = q.map(|v| v / norm);
+        // With y up the rotation is composed with −90° about x: q' = r ⊗ q,
+        // r = (√½, −√½, 0, 0).
+        let [w, x, y, z] = match up {
+            Up::Z => [w, x, y, z],
+            Up::Y => {
+                let h = std::f32::consts::FRAC_1_SQRT_2;
+                [h * (w + x), h * (x - w), h * (y + z), h * (z - y)]
+            }
+        };
         let n = [
             2.0 * (x * z + w * y),
             2.0 * (y * z - w * x),
             1.0 - 2.0 * (x * x + y * y),
         ];
-        let rgb = p.rgb[i].map(|c| (c - 0.5) / C0);
+        let rgb = match colours {
+            Some(c) => c[i].map(|v| (v as f32 / 255.0 - 0.5) / C0),
+            None => p.rgb[i].map(|c| (c - 0.5) / C0),
+        };
+        let pos = turn(up, p.pos[i]);
         let row = [
-            p.pos[i][0],
-            p.pos[i][1],
-            p.pos[i][2],
+            pos[0],
+            pos[1],
+            pos[2],
             n[0],
             n[1],
             n[2],

@@ -204,11 +204,17 @@ fn splats(out: &std::path::Path) -> Result<(), String> {
     let write = |name: &str, bytes: &[u8]| {
         std::fs::write(out.join(name), bytes).map_err(|e| format!("{name}: {e}"))
     };
-    write("splats-z.ply", &surfels_ply(&p, origin, Up::Z, None))?;
-    write("splats-y.ply", &surfels_ply(&p, origin, Up::Y, None))?;
+    write(
+        "splats-z.ply",
+        &surfels_ply(&p, origin, Up::Z, None, "test"),
+    )?;
+    write(
+        "splats-y.ply",
+        &surfels_ply(&p, origin, Up::Y, None, "test"),
+    )?;
     write(
         "splats-semantic.ply",
-        &surfels_ply(&p, origin, Up::Z, Some(&colours)),
+        &surfels_ply(&p, origin, Up::Z, Some(&colours), "test"),
     )?;
     let json = serde_json::json!({
         "pos": p.pos, "rgb": p.rgb, "log_scale": p.log_scale, "opacity": p.opacity,

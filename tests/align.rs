@@ -99,6 +99,8 @@ fn frame(k: usize) -> Manifest {
         }],
         lidar: None,
         ground_truth: None,
+        world_frame: None,
+        corridor_half_width_m: None,
     }
 }
 

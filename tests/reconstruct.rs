@@ -60,14 +60,20 @@ fn demo_reconstruction_beats_the_ipm_baseline_and_meets_measured_floors() {
     );
     assert!(h.psnr_db > h.ipm_psnr_db, "held-out PSNR {h:?}");
     // Every export decodes with the map's size.
-    let mut files = rogs::export::files(&o, &b.manifest).expect("exports");
+    // In a dataset's frame (as an importer records it): the GeoTIFFs are placed there.
+    let mut m = b.manifest.clone();
+    m.world_frame = Some(rogs::bundle::WorldFrame {
+        name: "test frame".into(),
+        offset_m: [1000.0, 2000.0, 5.0],
+    });
+    let mut files = rogs::export::files(&o, &m).expect("exports");
     files.extend(rogs::export::model_files(
         &o.params,
         s.origin,
         &b.manifest,
         rogs::export::ply::Up::Z,
     ));
-    geotiffs_read_by_gdal(&files, &o.geometry);
+    geotiffs_read_by_gdal(&files, &o.geometry, [1000.0, 2000.0, 5.0]);
     let png = files.iter().find(|f| f.0 == "rgb.png").expect("rgb.png");
     let img = image::load_from_memory(&png.1).expect("png");
     assert_eq!(
@@ -214,9 +220,10 @@ fn an_uncaught_gpu_error_becomes_an_error_in_words() {
 }
 
 /// The GeoTIFFs as GDAL reads them: size, georeference, no-data, band layout, and
-/// every elevation equal (bit for bit, NaN where empty) to `elevation.f32`, every
+/// every elevation equal (bit for bit, NaN where empty) to `elevation.f32` plus the
+/// world frame's z offset (the tie point carries its x, y offset), every
 /// class id to `semantic_ids.png` where the map is valid.
-fn geotiffs_read_by_gdal(files: &[(String, Vec<u8>)], g: &rogs::bev::BevGeometry) {
+fn geotiffs_read_by_gdal(files: &[(String, Vec<u8>)], g: &rogs::bev::BevGeometry, off: [f64; 3]) {
     let dir = std::env::temp_dir().join(format!("rogs-gdal-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let get = |n: &str| {
@@ -249,10 +256,10 @@ fn geotiffs_read_by_gdal(files: &[(String, Vec<u8>)], g: &rogs::bev::BevGeometry
     assert_eq!(e["size"], serde_json::json!([g.width, g.height]));
     let gt: Vec<f64> = serde_json::from_value(e["geoTransform"].clone()).expect("geoTransform");
     let want = [
-        g.origin[0],
+        g.origin[0] + off[0],
         g.resolution,
         0.0,
-        g.origin[1],
+        g.origin[1] + off[1],
         0.0,
         -g.resolution,
     ];
@@ -274,10 +281,13 @@ fn geotiffs_read_by_gdal(files: &[(String, Vec<u8>)], g: &rogs::bev::BevGeometry
         &["-q", "-of", "ENVI", "elevation.tif", "elevation.bin"],
     );
     let z = std::fs::read(dir.join("elevation.bin")).expect("elevation.bin");
+    let want: Vec<u8> = get("elevation.f32")
+        .chunks_exact(4)
+        .flat_map(|b| (f32::from_le_bytes([b[0], b[1], b[2], b[3]]) + off[2] as f32).to_le_bytes())
+        .collect();
     assert_eq!(
-        &z,
-        get("elevation.f32"),
-        "elevation.tif differs from elevation.f32"
+        z, want,
+        "elevation.tif differs from elevation.f32 + the frame's z offset"
     );
     run(
         "gdal_translate",

@@ -269,4 +269,37 @@ fn two_drives_of_one_street_make_one_map_and_drives_apart_are_refused() {
         Err(e) => e.to_string(),
     };
     assert!(e.contains("b.zip: semantic_classes"), "{e}");
+    // Two drives of one dataset frame, each shifted to its own first pose (as the
+    // nuScenes importer does): b's poses are brought into a's, so the 1 km shift
+    // the offsets explain is undone and they merge.
+    let framed = |m: &Manifest, off: f64| {
+        let mut p = m.clone();
+        p.world_frame = Some(rogs::bundle::WorldFrame {
+            name: "nuScenes global frame of boston-seaport".into(),
+            offset_m: [off, 0.0, 0.0],
+        });
+        p
+    };
+    let a = framed(&part(&m, 0..n, 0.0), 500.0);
+    let b = framed(&part(&m, 0..n, -1000.0), 1500.0);
+    let merged = Bundle::merge(vec![bundle(&a, &files), bundle(&b, &files)], &names)
+        .expect("one frame, two offsets");
+    let fr = &merged.manifest.frames;
+    for k in 0..n {
+        assert!((fr[n + k].vehicle_to_world[0][3] - fr[k].vehicle_to_world[0][3]).abs() < 1e-9);
+    }
+    assert_eq!(merged.manifest.world_frame, a.world_frame);
+    // Other frames are refused by name.
+    let mut c = framed(&part(&m, 0..n, 0.0), 0.0);
+    if let Some(f) = &mut c.world_frame {
+        f.name = "nuScenes global frame of singapore-onenorth".into();
+    }
+    let e = match Bundle::merge(vec![bundle(&a, &files), bundle(&c, &files)], &names) {
+        Ok(_) => panic!("merged two world frames"),
+        Err(e) => e.to_string(),
+    };
+    assert!(
+        e.contains("b.zip: world_frame") && e.contains("singapore"),
+        "{e}"
+    );
 }

@@ -73,6 +73,8 @@ function showSummary(s, source) {
     ['cameras', String(s.cameras.length)],
     ['LiDAR', s.lidar_points ? `${s.lidar_points.toLocaleString('en')} points in ${s.lidar_sweeps} sweeps` : 'none'],
     ['ground truth', s.ground_truth ? `BEV ${s.ground_truth.width}×${s.ground_truth.height} at ${s.ground_truth.resolution_m} m` : 'none'],
+    ['world frame', s.world_frame || 'local (the bundle names no dataset frame)'],
+    ['corridor', s.corridor_half_width_m ? `${s.corridor_half_width_m} m either side (the bundle's)` : 'not given: 4 m either side'],
   ];
   const dl = $('summary-facts');
   dl.innerHTML = '';
@@ -118,6 +120,8 @@ async function openBytes(bytes, source) {
     if (r.status === 'valid') {
       showSummary(r.summary, source);
       offerOptimisation(bytes, r.summary.classes);
+      // The corridor the bundle asks for (its importer's), unless changed by hand.
+      $('set-half-width').value = String(r.summary.corridor_half_width_m || 4);
       setStatus(`${source} is a valid bundle: press Optimise to build its map.`, 'ok');
     } else {
       showProblems(r.problems);

@@ -150,6 +150,8 @@ pub fn tiny() -> (Manifest, Vec<BundleFile>) {
             elevation: "truth/elevation.f32".into(),
             valid: "truth/valid.png".into(),
         }),
+        world_frame: None,
+        corridor_half_width_m: None,
     };
     (manifest, files)
 }

@@ -32,6 +32,22 @@ pub struct Manifest {
     pub lidar: Option<LidarSensor>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ground_truth: Option<GroundTruth>,
+    /// The frame the poses are in, when it is a dataset's own (optional).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub world_frame: Option<WorldFrame>,
+    /// The corridor half-width a map of this drive uses when none is asked for
+    /// (metres): importers set their dataset's (nuScenes 8, KITTI 4).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub corridor_half_width_m: Option<f64>,
+}
+
+/// A bundle's world frame in a dataset's terms: a point at bundle coordinates `p` is
+/// at `p + offset_m` in the frame called `name` (e.g. the nuScenes map of one
+/// location), so that a map lines up with the dataset's own maps.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WorldFrame {
+    pub name: String,
+    pub offset_m: [f64; 3],
 }
 
 /// What a class means to the optimiser.
@@ -120,6 +136,23 @@ pub struct GroundTruth {
 }
 
 impl Manifest {
+    /// The offset from the bundle's world to its dataset frame (zero without one).
+    pub fn frame_offset(&self) -> [f64; 3] {
+        self.world_frame.as_ref().map_or([0.0; 3], |f| f.offset_m)
+    }
+
+    /// The world frame in words, for file headers: the dataset frame and offset, or
+    /// the bundle's own local frame.
+    pub fn frame_description(&self) -> String {
+        match &self.world_frame {
+            Some(f) => format!(
+                "{}; bundle world = {} minus [{:.3}, {:.3}, {:.3}] m",
+                f.name, f.name, f.offset_m[0], f.offset_m[1], f.offset_m[2]
+            ),
+            None => format!("the local world frame of {:?}", self.name),
+        }
+    }
+
     /// Every file path the manifest references, with the field it came from.
     pub fn referenced_files(&self) -> Vec<(String, &str)> {
         let mut out = Vec::new();

@@ -98,6 +98,43 @@ impl Bundle {
                 .cloned()
                 .unwrap_or_else(|| format!("bundle {}", k + 1))
         };
+        // Drives in one dataset frame with different offsets (two nuScenes scenes of a
+        // place, each shifted to its own first pose) are brought into the first's.
+        let frame0 = bundles[0].manifest.world_frame.clone();
+        for (k, b) in bundles.iter_mut().enumerate().skip(1) {
+            let m = &mut b.manifest;
+            match (&frame0, &m.world_frame) {
+                (None, None) => {}
+                (Some(f0), Some(f)) if f0.name == f.name => {
+                    let d: [f64; 3] = [0, 1, 2].map(|i| f.offset_m[i] - f0.offset_m[i]);
+                    for fr in &mut m.frames {
+                        for (i, di) in d.iter().enumerate() {
+                            fr.vehicle_to_world[i][3] += di;
+                        }
+                    }
+                    if let Some(g) = &mut m.ground_truth {
+                        g.origin[0] += d[0];
+                        g.origin[1] += d[1];
+                    }
+                    m.world_frame = frame0.clone();
+                }
+                (a, b) => {
+                    let said = |f: &Option<super::WorldFrame>| {
+                        f.as_ref()
+                            .map_or("no world frame".to_string(), |f| format!("{:?}", f.name))
+                    };
+                    return Err(invalid(
+                        format!("{}: world_frame", name(k)),
+                        format!(
+                            "is {}, {}'s is {}; drives of one map must be in one world frame",
+                            said(b),
+                            name(0),
+                            said(a)
+                        ),
+                    ));
+                }
+            }
+        }
         let first = bundles[0].manifest.clone();
         // Every drive must come within DRIVE_GAP_M of a drive already connected to
         // the first: one map of one place, not two maps side by side.

@@ -17,6 +17,10 @@ pub struct Summary {
     pub lidar_points: u64,
     pub lidar_sweeps: usize,
     pub ground_truth: Option<GroundTruthSummary>,
+    /// The bundle's corridor half-width, metres (its `corridor_half_width_m`).
+    pub corridor_half_width_m: Option<f64>,
+    /// The dataset frame the poses are in, in words (none: a local frame).
+    pub world_frame: Option<String>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -93,6 +97,8 @@ impl Summary {
                 height: g.height,
                 resolution_m: g.resolution,
             }),
+            corridor_half_width_m: m.corridor_half_width_m,
+            world_frame: m.world_frame.as_ref().map(|_| m.frame_description()),
         }
     }
 

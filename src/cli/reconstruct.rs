@@ -42,9 +42,10 @@ pub struct Args {
     /// Grid spacing in metres (the paper: 0.05). Coarser is faster and lighter.
     #[arg(long, default_value_t = 0.05)]
     resolution: f64,
-    /// Corridor half-width around the trajectory, metres (8 for nuScenes, 4 for KITTI).
-    #[arg(long, default_value_t = 8.0)]
-    half_width: f64,
+    /// Corridor half-width around the trajectory, metres. Default: the bundle's
+    /// `corridor_half_width_m` (the importers write 8 for nuScenes, 4 for KITTI), else 8.
+    #[arg(long)]
+    half_width: Option<f64>,
     /// Ignore the bundle's LiDAR (no LiDAR elevation loss, no LiDAR refinement cue).
     #[arg(long)]
     no_lidar: bool,
@@ -108,10 +109,16 @@ pub struct Args {
     ply_up: crate::export::ply::Up,
 }
 
-fn config(a: &Args) -> ReconstructConfig {
+/// The corridor half-width when neither the command nor the bundle gives one.
+const DEFAULT_HALF_WIDTH_M: f64 = 8.0;
+
+fn config(a: &Args, m: &crate::bundle::Manifest) -> ReconstructConfig {
     let mut c = ReconstructConfig::default();
     c.prepare.grid.resolution = a.resolution;
-    c.prepare.grid.half_width = a.half_width;
+    c.prepare.grid.half_width = a
+        .half_width
+        .or(m.corridor_half_width_m)
+        .unwrap_or(DEFAULT_HALF_WIDTH_M);
     c.prepare.refine.enabled = !a.no_adaptive;
     c.prepare.use_lidar = !a.no_lidar;
     c.prepare.init.method = match a.init {
@@ -169,7 +176,7 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
     };
     std::fs::create_dir_all(&a.out)
         .map_err(|e| format!("cannot create {}: {e}", a.out.display()))?;
-    let cfg = config(&a);
+    let cfg = config(&a, &b.manifest);
     let asked = a.tile_m.map(|size_m| TileConfig {
         size_m,
         overlap_m: a.tile_overlap_m,

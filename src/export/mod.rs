@@ -139,10 +139,13 @@ pub fn model_files(
         .collect();
     vec![
         ("surfel_centres.f32".into(), centres),
-        ("surfels.ply".into(), ply::surfels_ply(p, origin, up, None)),
+        (
+            "surfels.ply".into(),
+            ply::surfels_ply(p, origin, up, None, &m.frame_description()),
+        ),
         (
             "surfels_semantic.ply".into(),
-            ply::surfels_ply(p, origin, up, Some(&classes)),
+            ply::surfels_ply(p, origin, up, Some(&classes), &m.frame_description()),
         ),
     ]
 }
@@ -182,6 +185,7 @@ pub fn files(o: &Outcome, m: &Manifest) -> Result<Vec<(String, Vec<u8>)>, String
         "note": "origin is the world x of the west edge and y of the north edge; row 0 is north; \
                  elevation.npy/.f32 hold world z in metres, NaN where the map is empty",
         "elevation_min_m": lo, "elevation_max_m": hi,
+        "world_frame": m.world_frame, "frame": m.frame_description(),
     });
     out.push((
         "bev.json".into(),
@@ -208,8 +212,13 @@ const LEGEND_WIDTH: u32 = 400;
 
 /// `elevation.tif`, `rgb.tif` and `semantic.tif` (docs/OUTPUTS.md).
 fn geotiffs(o: &Outcome, m: &Manifest, z: &[f32]) -> Result<Vec<(String, Vec<u8>)>, String> {
-    let g = &o.geometry;
-    let frame = &m.name;
+    // The tie point in the dataset's frame, so that the GeoTIFFs line up with its maps.
+    let off = m.frame_offset();
+    let g = &BevGeometry {
+        origin: [o.geometry.origin[0] + off[0], o.geometry.origin[1] + off[1]],
+        ..o.geometry
+    };
+    let frame = &m.frame_description();
     let r = &o.raster;
     let ids: Vec<u8> = r
         .class_ids
@@ -219,10 +228,11 @@ fn geotiffs(o: &Outcome, m: &Manifest, z: &[f32]) -> Result<Vec<(String, Vec<u8>
         .map(|(&c, &v)| if v != 0 { c } else { geotiff::SEMANTIC_NODATA })
         .collect();
     let rgba = layer_rgba(o, m, "rgb").unwrap_or_default();
+    let z: Vec<f32> = z.iter().map(|v| v + off[2] as f32).collect();
     Ok(vec![
         (
             "elevation.tif".into(),
-            geotiff::float_tif("elevation.tif", z, g, frame)?,
+            geotiff::float_tif("elevation.tif", &z, g, frame)?,
         ),
         (
             "rgb.tif".into(),

@@ -46,6 +46,7 @@ pub fn surfels_ply(
     origin: [f64; 3],
     up: Up,
     colours: Option<&[[u8; 3]]>,
+    frame: &str,
 ) -> Vec<u8> {
     let props = [
         "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0",
@@ -57,8 +58,8 @@ pub fn surfels_ply(
             .to_string(),
     };
     let mut head = format!(
-        "ply\nformat binary_little_endian 1.0\ncomment rogs surfels; world = local + origin {} {} {}\n{axes}\nelement vertex {}\n",
-        origin[0], origin[1], origin[2], p.len()
+        "ply\nformat binary_little_endian 1.0\ncomment rogs surfels; world = local + origin {} {} {}\n{axes}\ncomment world frame: {}\nelement vertex {}\n",
+        origin[0], origin[1], origin[2], frame.replace('\n', " "), p.len()
     );
     for name in props {
         head.push_str(&format!("property float {name}\n"));

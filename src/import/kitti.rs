@@ -407,6 +407,14 @@ pub fn import(opts: &KittiOptions, progress: ProgressFn) -> Result<Imported, Imp
         frames,
         lidar,
         ground_truth: None,
+        world_frame: Some(crate::bundle::WorldFrame {
+            name: format!(
+                "KITTI odometry sequence {} (the frame of its poses file, turned z up)",
+                opts.sequence
+            ),
+            offset_m: [0.0; 3],
+        }),
+        corridor_half_width_m: Some(4.0),
     };
     out.finish(manifest, warnings, progress)
 }

@@ -16,13 +16,15 @@ use super::{
     all_road_classes, apply, header_dims, inverse, mul, read_file, resolve, rigid, zero_label,
     ImportError, Imported, Output, ProgressFn, NO_LABELS_WARNING,
 };
-use crate::bundle::{Camera, Frame, LidarSensor, Manifest, Mat4Rows, View, FORMAT, VERSION};
+use crate::bundle::{
+    Camera, Frame, LidarSensor, Manifest, Mat4Rows, View, WorldFrame, FORMAT, VERSION,
+};
 use labels::{find_label, remap_label};
 pub use labels::{ids, vistas_classes, vistas_remap};
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 pub use tables::{CalibratedSensor, EgoPose, SampleData};
-use tables::{Sample, Scene, Sensor};
+use tables::{Log, Sample, Scene, Sensor};
 
 /// The six cameras, in the order the bundle lists them.
 pub const CAMERAS: [&str; 6] = [
@@ -120,6 +122,8 @@ struct SceneData {
     ego: HashMap<String, EgoPose>,
     /// First and last keyframe times, µs.
     span: (i64, i64),
+    /// The scene's location (log.json), when the tables have it.
+    location: Option<String>,
 }
 
 fn load(opts: &NuScenesOptions, channels: &HashSet<String>) -> Result<SceneData, String> {
@@ -187,11 +191,21 @@ fn load(opts: &NuScenesOptions, channels: &HashSet<String>) -> Result<SceneData,
         r.sort_by_key(|d| d.timestamp);
     }
     let calib = calibs.into_iter().map(|c| (c.token.clone(), c)).collect();
+    let location = if dir.join("log.json").is_file() {
+        let logs: Vec<Log> = tables::read(&dir, "log.json", |l: &Log| l.token == scene.log_token)?;
+        logs.into_iter()
+            .next()
+            .map(|l| l.location)
+            .filter(|l| !l.is_empty())
+    } else {
+        None
+    };
     Ok(SceneData {
         records,
         calib,
         ego,
         span,
+        location,
     })
 }
 
@@ -434,6 +448,14 @@ pub fn import(opts: &NuScenesOptions, progress: ProgressFn) -> Result<Imported, 
             lidar_to_vehicle: l2v,
         }),
         ground_truth: None,
+        world_frame: Some(WorldFrame {
+            name: match &scene.location {
+                Some(l) => format!("nuScenes global frame of {l} (the map expansion's)"),
+                None => "nuScenes global frame".into(),
+            },
+            offset_m: [origin[0][3], origin[1][3], origin[2][3]],
+        }),
+        corridor_half_width_m: Some(8.0),
     };
     out.finish(manifest, warnings, progress)
 }

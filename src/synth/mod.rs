@@ -408,6 +408,8 @@ pub fn generate(cfg: &SynthConfig, progress: Progress) -> Result<SynthOutput, St
             lidar_to_vehicle,
         }),
         ground_truth: Some(ground_truth),
+        world_frame: None,
+        corridor_half_width_m: None,
     };
     Ok(SynthOutput {
         manifest,

@@ -796,6 +796,7 @@ impl TiledRun {
         r["peak_gpu_bytes"] = serde_json::to_value(self.peak_gpu_bytes).unwrap_or_default();
         r["peak_host_bytes"] =
             serde_json::to_value(crate::mem::peak_host_bytes()).unwrap_or_default();
+        r["world_frame"] = serde_json::to_value(&b.manifest.world_frame).unwrap_or_default();
         r["drives"] = b
             .drives
             .iter()

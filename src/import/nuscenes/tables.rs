@@ -14,6 +14,16 @@ use std::path::Path;
 pub struct Scene {
     pub token: String,
     pub name: String,
+    #[serde(default)]
+    pub log_token: String,
+}
+
+/// A drive's log: where it was recorded (the map expansion's location name).
+#[derive(Clone, Debug, Deserialize)]
+pub struct Log {
+    pub token: String,
+    #[serde(default)]
+    pub location: String,
 }
 
 #[derive(Clone, Debug, Deserialize)]

@@ -62,8 +62,10 @@ export function createServer(mounts) {
 if (process.argv[1] === fileURLToPath(import.meta.url)) {
   const i = process.argv.indexOf('--port');
   const port = i > 0 ? Number(process.argv[i + 1]) : 8080;
+  const r = process.argv.indexOf('--root');
   const root = path.resolve(path.dirname(fileURLToPath(import.meta.url)), '..');
-  createServer([['/', path.join(root, 'www')]]).listen(port, '127.0.0.1', () => {
+  const dir = r > 0 ? path.resolve(process.argv[r + 1]) : path.join(root, 'www');
+  createServer([['/', dir]]).listen(port, '127.0.0.1', () => {
     console.log(`rogs is running at http://127.0.0.1:${port}/  (Ctrl+C to stop)`);
   });
 }

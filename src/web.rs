@@ -63,6 +63,16 @@ pub fn example_bundle() -> Result<Vec<u8>, JsValue> {
     write_zip(&m, &files).map_err(|e| JsValue::from_str(&e))
 }
 
+/// The embedded demo scene (`synth::demo_scene`): `{ bundle, truth_map }`, zip bytes.
+#[wasm_bindgen]
+pub fn demo_scene() -> Result<JsValue, JsValue> {
+    let (bundle, map) = crate::synth::demo_scene().map_err(|e| JsValue::from_str(&e))?;
+    let o = js_sys::Object::new();
+    js_sys::Reflect::set(&o, &"bundle".into(), &js_sys::Uint8Array::from(&bundle[..]))?;
+    js_sys::Reflect::set(&o, &"truth_map".into(), &js_sys::Uint8Array::from(&map[..]))?;
+    Ok(o.into())
+}
+
 /// Finds the WebGPU adapter, runs the scatter-add self-test against the CPU and
 /// returns the adapter report; rejects with advice when WebGPU is unavailable.
 #[wasm_bindgen]

@@ -235,4 +235,13 @@ impl Reconstruction {
             .map(|f| f.1.clone())
             .ok_or_else(|| err(format!("no file {name:?}")))
     }
+
+    /// Every export file in one zip (the CLI's output folder, zipped).
+    pub fn exports_zip(&self) -> Result<Vec<u8>, JsValue> {
+        let mut z = crate::bundle::ZipBundleWriter::new(std::io::Cursor::new(Vec::new()));
+        for (name, bytes) in &self.files {
+            z.add(name, bytes).map_err(err)?;
+        }
+        Ok(z.finish_raw().map_err(err)?.into_inner())
+    }
 }

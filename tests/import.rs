@@ -512,7 +512,10 @@ fn nuscenes_fixture_poses_calibrations_lidar_and_labels_come_out_exactly() {
     let wf = m.world_frame.as_ref().expect("world frame");
     assert!(wf.name.starts_with("nuScenes global frame"), "{}", wf.name);
     let t0 = [0, 1, 2].map(|i| m.frames[0].vehicle_to_world[i][3]);
-    assert!(t0.iter().all(|v| v.abs() < 1e-9), "first pose at the origin: {t0:?}");
+    assert!(
+        t0.iter().all(|v| v.abs() < 1e-9),
+        "first pose at the origin: {t0:?}"
+    );
     assert_eq!(m.corridor_half_width_m, Some(8.0));
     eprintln!("warnings: {:?}", done.warnings);
     assert!(

@@ -150,6 +150,35 @@ async function openFile(file) {
   }
 }
 
+// The body of a response, with the download's progress in the status line.
+async function readWithProgress(res, url) {
+  const total = Number(res.headers.get('content-length')) || 0;
+  if (!res.body) return new Uint8Array(await res.arrayBuffer());
+  const reader = res.body.getReader();
+  const parts = [];
+  let got = 0;
+  let shown = 0;
+  const t0 = performance.now();
+  for (;;) {
+    const { done, value } = await reader.read();
+    if (done) break;
+    parts.push(value);
+    got += value.length;
+    if (performance.now() - shown > 200) {
+      shown = performance.now();
+      const mib = (v) => (v / 1048576).toFixed(1);
+      const rate = got / Math.max(1e-3, (shown - t0) / 1000);
+      const eta = total ? ` · ETA ${Math.ceil((total - got) / rate)} s` : '';
+      setStatus(`Downloading ${url}: ${mib(got)}${total ? ` of ${mib(total)}` : ''} MiB${total ? ` (${Math.round((100 * got) / total)} %)` : ''}${eta}`);
+      document.body.dataset.download = String(got);
+    }
+  }
+  const out = new Uint8Array(got);
+  let o = 0;
+  for (const p of parts) { out.set(p, o); o += p.length; }
+  return out;
+}
+
 async function openUrl(url) {
   setStatus(`Downloading ${url}…`);
   try {
@@ -158,7 +187,7 @@ async function openUrl(url) {
       const hint = url === 'demo/demo.zip' ? ' (npm start generates the demo scene)' : '';
       throw new Error(`the server answered ${res.status} ${res.statusText}${hint}`);
     }
-    await openBytes(new Uint8Array(await res.arrayBuffer()), url);
+    await openBytes(await readWithProgress(res, url), url);
   } catch (e) {
     setStatus(`Could not download ${url}: ${e.message || e}. Check the address, or drop the file instead.`, 'error');
   }

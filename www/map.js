@@ -186,6 +186,24 @@ function listExports(rec) {
     a.href = URL.createObjectURL(new Blob([rec.file(name)]));
     ex.append(a, ' ');
   }
+  if (ex.childElementCount) {
+    const all = document.createElement('a');
+    all.textContent = 'all exports (.zip)';
+    all.download = 'rogs-map.zip';
+    all.id = 'exports-zip';
+    all.href = '#';
+    all.addEventListener('click', (e) => {
+      if (all.href.startsWith('blob:')) return; // made once, then a plain download
+      e.preventDefault();
+      try {
+        all.href = URL.createObjectURL(new Blob([rec.exports_zip()], { type: 'application/zip' }));
+        all.click();
+      } catch (err) {
+        all.textContent = `all exports (.zip): ${err}`;
+      }
+    });
+    ex.append(all, ' ');
+  }
   return ex;
 }
 

@@ -418,3 +418,28 @@ pub fn generate(cfg: &SynthConfig, progress: Progress) -> Result<SynthOutput, St
         world,
     })
 }
+
+/// The page's embedded demo: `rogs synth --preset demo --seed 1 --lidar
+/// --pose-noise-m 0.05 --pose-noise-deg 0.5 --truth-map …`, as the bundle's zip bytes
+/// and the truth's map file. `npm start` makes it with the wasm engine in Node, so
+/// that no native build is needed.
+pub fn demo_scene() -> Result<(Vec<u8>, Vec<u8>), String> {
+    let mut cfg = SynthConfig::preset(Preset::Demo, 1);
+    cfg.lidar = true;
+    cfg.noise = PoseNoise {
+        translation_m: 0.05,
+        rotation_deg: 0.5,
+        drift_m: 0.05,
+    };
+    let out = generate(&cfg, &|_, _, _| {})?;
+    let bundle = crate::bundle::write_zip(&out.manifest, &out.files)?;
+    let map = truth::map_file(
+        &out.world,
+        &out.true_poses,
+        &format!("synthetic {:?} (seed {}), truth", cfg.preset, cfg.seed),
+        cfg.corridor_half_width,
+        cfg.truth_resolution,
+        &mut |_, _| {},
+    )?;
+    Ok((bundle, map))
+}

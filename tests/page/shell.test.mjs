@@ -125,6 +125,14 @@ test('the demo optimises in the page; layers, pan, zoom and exports work; errors
   });
   assert.deepEqual(size.slice(0, 2), size.slice(2));
   assert.ok(size[0] > 10);
+  // Every export in one zip.
+  await page.click('#exports-zip');
+  const zip = await page.evaluate(async () => {
+    const b = new Uint8Array(await (await fetch(document.getElementById('exports-zip').href)).arrayBuffer());
+    return [b[0], b[1], b.length, new TextDecoder().decode(b).includes('elevation.tif')];
+  });
+  assert.deepEqual(zip.slice(0, 2), [0x50, 0x4b], 'a zip');
+  assert.ok(zip[3], 'holds elevation.tif');
   // The run's own map in review: a frame clicked on its trajectory shows this run's
   // camera view in the panel.
   await page.click('#review-run');

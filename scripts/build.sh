@@ -1,0 +1,23 @@
+#!/usr/bin/env bash
+# Writes a self-contained static site to dist/: the page, the optimised wasm engine
+# and the demo scene, all by relative paths, so that any static host serves it as it
+# is (docs/PUBLISH.md). Prints the wasm's size, raw and gzipped.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup.sh
+. scripts/env.sh
+echo "build: the engine for the browser (wasm, release)…"
+wasm-pack build --release --target web --out-dir www/pkg --mode no-install --no-typescript --no-pack
+if [ ! -f www/demo/demo.zip ] || [ ! -f www/demo/demo-truth.rogsmap ]; then
+  node scripts/make-demo.mjs
+fi
+rm -rf dist
+mkdir -p dist/pkg dist/demo
+cp www/index.html www/style.css www/*.js dist/
+cp www/pkg/rogs.js www/pkg/rogs_bg.wasm dist/pkg/
+cp www/demo/demo.zip www/demo/demo-truth.rogsmap dist/demo/
+raw=$(stat -c %s dist/pkg/rogs_bg.wasm)
+gz=$(gzip -9 -c dist/pkg/rogs_bg.wasm | wc -c)
+total=$(du -sb dist | cut -f1)
+awk -v t="$total" -v r="$raw" -v g="$gz" 'BEGIN { printf "build: dist/ is ready (%.1f MiB in all); rogs_bg.wasm %.2f MB, %.2f MB gzipped\n", t / 1048576, r / 1e6, g / 1e6 }'
+echo "build: serve it with any static server, e.g. node scripts/serve.mjs --root dist"

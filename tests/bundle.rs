@@ -256,6 +256,19 @@ fn poses_finite_and_orthonormal() {
     let (mut m, files) = example::tiny();
     m.frames[1].vehicle_to_world[0][1] = 1e-5;
     assert!(open(&m, &files).is_ok());
+    // A view's own pose is checked as the frame's, and named as a view's.
+    let (mut m, files) = example::tiny();
+    let mut t = m.frames[1].vehicle_to_world;
+    t[0][0] = 1.1;
+    m.frames[1].views[0].vehicle_to_world = Some(t);
+    let p = problems(&m, &files);
+    assert!(
+        p.iter().any(|p| matches!(p, Problem::NotRotation { field, .. } if field == "frames[1].views[0].vehicle_to_world")),
+        "{p:?}"
+    );
+    let (mut m, files) = example::tiny();
+    m.frames[1].views[0].vehicle_to_world = Some(m.frames[2].vehicle_to_world);
+    assert!(open(&m, &files).is_ok());
 }
 
 #[test]

@@ -550,6 +550,14 @@ fn nuscenes_fixture_poses_calibrations_lidar_and_labels_come_out_exactly() {
         assert!(d < 1e-9, "frame {k} vehicle_to_world off by {d}");
         assert!((f.timestamp - 0.5 * k as f64).abs() < 1e-9);
         assert_eq!(f.views.len(), 2);
+        // CAM_BACK fired at another time: its view carries its own ego pose.
+        assert!(
+            f.views[0].vehicle_to_world.is_none(),
+            "CAM_FRONT is the anchor"
+        );
+        let own = f.views[1].vehicle_to_world.expect("CAM_BACK's own pose");
+        let d = max_diff(&own, &rows(shift * transform(ego(k, 1))));
+        assert!(d < 1e-9, "frame {k} CAM_BACK pose off by {d}");
     }
 
     // LiDAR: 4 floats per point, moved from the LiDAR's ego pose into the frame's.

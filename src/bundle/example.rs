@@ -109,6 +109,7 @@ pub fn tiny() -> (Manifest, Vec<BundleFile>) {
                 camera: "front".into(),
                 image,
                 label,
+                vehicle_to_world: None,
             }],
             lidar: Some(lidar),
         });

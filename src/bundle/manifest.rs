@@ -96,6 +96,15 @@ pub struct Frame {
     pub lidar: Option<String>,
 }
 
+impl Frame {
+    /// The vehicle pose a view's camera is placed with: its own, else the frame's.
+    pub fn view_pose<'a>(&'a self, v: &'a View) -> &'a Mat4Rows {
+        v.vehicle_to_world
+            .as_ref()
+            .unwrap_or(&self.vehicle_to_world)
+    }
+}
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct View {
     /// Name of a camera in `cameras`.
@@ -104,6 +113,11 @@ pub struct View {
     pub image: String,
     /// 8-bit PNG of class ids, same size as the image.
     pub label: String,
+    /// This view's own vehicle-to-world pose, when its camera fired at another time
+    /// than the frame's pose was taken (nuScenes cameras fire along the LiDAR sweep,
+    /// up to ~50 ms apart). Absent: the frame's `vehicle_to_world`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vehicle_to_world: Option<Mat4Rows>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

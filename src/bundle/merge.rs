@@ -108,8 +108,14 @@ impl Bundle {
                 (Some(f0), Some(f)) if f0.name == f.name => {
                     let d: [f64; 3] = [0, 1, 2].map(|i| f.offset_m[i] - f0.offset_m[i]);
                     for fr in &mut m.frames {
-                        for (i, di) in d.iter().enumerate() {
-                            fr.vehicle_to_world[i][3] += di;
+                        let views = fr
+                            .views
+                            .iter_mut()
+                            .filter_map(|v| v.vehicle_to_world.as_mut());
+                        for t in std::iter::once(&mut fr.vehicle_to_world).chain(views) {
+                            for (i, di) in d.iter().enumerate() {
+                                t[i][3] += di;
+                            }
                         }
                     }
                     if let Some(g) = &mut m.ground_truth {

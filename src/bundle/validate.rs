@@ -108,6 +108,11 @@ impl Validator<'_> {
                 &format!("frames[{fi}].vehicle_to_world"),
                 &f.vehicle_to_world,
             );
+            for (vi, v) in f.views.iter().enumerate() {
+                if let Some(t) = &v.vehicle_to_world {
+                    self.rigid(&format!("frames[{fi}].views[{vi}].vehicle_to_world"), t);
+                }
+            }
             if f.views.is_empty() {
                 self.invalid(
                     format!("frames[{fi}].views"),

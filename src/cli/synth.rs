@@ -47,6 +47,14 @@ pub struct Args {
     /// Number of frames.
     #[arg(long)]
     frames: Option<usize>,
+    /// Camera k fires k × this many milliseconds after the frame's pose (as nuScenes
+    /// cameras fire along the LiDAR sweep); each view then carries its own pose.
+    #[arg(long, default_value_t = 0.0)]
+    camera_stagger_ms: f64,
+    /// With --camera-stagger-ms, write only the frames' poses (every camera placed as
+    /// if it fired with the first), to measure what per-view poses are worth.
+    #[arg(long)]
+    no_view_poses: bool,
     /// Image width in pixels.
     #[arg(long)]
     width: Option<u32>,
@@ -75,6 +83,8 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
     };
     cfg.cameras = a.cameras.unwrap_or(cfg.cameras);
     cfg.frames = a.frames.unwrap_or(cfg.frames);
+    cfg.camera_stagger_s = a.camera_stagger_ms / 1000.0;
+    cfg.view_poses = !a.no_view_poses;
     if let Some(m) = a.length_m {
         if !(m.is_finite() && m > 0.0) {
             return Err(format!(

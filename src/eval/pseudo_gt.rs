@@ -85,10 +85,7 @@ fn colour_point(
             let Some(cam) = m.camera(&v.camera) else {
                 continue;
             };
-            let c = apply(
-                &invert(&mul(&f.vehicle_to_world, &cam.camera_to_vehicle)),
-                w,
-            );
+            let c = apply(&invert(&mul(f.view_pose(v), &cam.camera_to_vehicle)), w);
             if c[2] < 0.5 {
                 continue;
             }

@@ -379,6 +379,7 @@ pub fn import(opts: &KittiOptions, progress: ProgressFn) -> Result<Imported, Imp
                 camera: cam_name.clone(),
                 image,
                 label,
+                vehicle_to_world: None,
             }],
             lidar: lidar_path,
         });

@@ -396,15 +396,15 @@ pub fn import(opts: &NuScenesOptions, progress: ProgressFn) -> Result<Imported, 
             };
             let Some(rec) = rec else { continue };
             used.insert(rec.token.as_str());
-            spread.add(rec.timestamp - anchor.timestamp, &pose, &scene.pose(rec)?);
-            views.push(write_view(
-                &mut out,
-                opts,
-                cam,
-                rec,
-                labels.as_deref(),
-                &lut,
-            )?);
+            let own = scene.pose(rec)?;
+            spread.add(rec.timestamp - anchor.timestamp, &pose, &own);
+            let mut view = write_view(&mut out, opts, cam, rec, labels.as_deref(), &lut)?;
+            // Each camera is placed with its own sample_data's ego pose: cameras fire
+            // along the sweep, up to ~50 ms (0.5 m at 10 m/s) from the anchor's.
+            if rec.token != anchor.token {
+                view.vehicle_to_world = Some(mul(&shift, &own));
+            }
+            views.push(view);
         }
         let lidar_path = match &lidar {
             Some(l2v) => write_sweep(&mut out, opts, &scene, anchor, &pose, l2v)?,
@@ -420,8 +420,8 @@ pub fn import(opts: &NuScenesOptions, progress: ProgressFn) -> Result<Imported, 
     }
     if cameras.len() > 1 {
         warnings.push(format!(
-            "all views of a frame use {anchor_channel}'s ego pose; the other cameras fired up \
-             to {:.0} ms from it and their own ego poses differ by up to {:.3} m and {:.2}°",
+            "each view carries its own ego pose: the other cameras fired up to {:.0} ms from \
+             {anchor_channel}'s and their ego poses differ from its by up to {:.3} m and {:.2}°",
             spread.dt_us as f64 / 1000.0,
             spread.metres,
             spread.degrees
@@ -592,5 +592,6 @@ fn write_view(
         camera: cam.name.clone(),
         image,
         label,
+        vehicle_to_world: None,
     })
 }

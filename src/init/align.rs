@@ -397,10 +397,10 @@ fn distinct(v: &mut Vec<u32>) -> usize {
 }
 
 /// Applies the corrections to the frames' vehicle-to-world poses: a rotation about
-/// the vehicle's origin by the slopes, then the height.
+/// the vehicle's origin by the slopes, then the height. Views with their own poses
+/// (cameras that fired at other times) get the same correction, about the same point.
 pub fn apply_to_poses(a: &Alignment, m: &mut Manifest) {
     for (f, &[h, bx, by]) in m.frames.iter_mut().zip(&a.corrections) {
-        let t = &mut f.vehicle_to_world;
         // z gains bx·dx + by·dy: a rotation by (by, −bx, 0) (small angles).
         let w = DVec3::new(by, -bx, 0.0);
         let rot = if w.length() > 0.0 {
@@ -408,17 +408,32 @@ pub fn apply_to_poses(a: &Alignment, m: &mut Manifest) {
         } else {
             DMat3::IDENTITY
         };
-        let r = DMat3::from_cols(
-            DVec3::new(t[0][0], t[1][0], t[2][0]),
-            DVec3::new(t[0][1], t[1][1], t[2][1]),
-            DVec3::new(t[0][2], t[1][2], t[2][2]),
-        );
-        let r2 = rot * r;
-        for (i, row) in t.iter_mut().take(3).enumerate() {
-            for (j, v) in row.iter_mut().take(3).enumerate() {
-                *v = r2.col(j)[i];
+        let t = &f.vehicle_to_world;
+        let pivot = DVec3::new(t[0][3], t[1][3], t[2][3]);
+        correct(&mut f.vehicle_to_world, rot, pivot, h);
+        for v in &mut f.views {
+            if let Some(t) = &mut v.vehicle_to_world {
+                correct(t, rot, pivot, h);
             }
         }
-        t[2][3] += h;
     }
+}
+
+/// `t` rotated by `rot` about `pivot`, then raised by `h`.
+fn correct(t: &mut crate::bundle::Mat4Rows, rot: DMat3, pivot: DVec3, h: f64) {
+    let r = DMat3::from_cols(
+        DVec3::new(t[0][0], t[1][0], t[2][0]),
+        DVec3::new(t[0][1], t[1][1], t[2][1]),
+        DVec3::new(t[0][2], t[1][2], t[2][2]),
+    );
+    let r2 = rot * r;
+    let p = DVec3::new(t[0][3], t[1][3], t[2][3]);
+    let p2 = pivot + rot * (p - pivot);
+    for (i, row) in t.iter_mut().take(3).enumerate() {
+        for (j, v) in row.iter_mut().take(3).enumerate() {
+            *v = r2.col(j)[i];
+        }
+        row[3] = p2[i];
+    }
+    t[2][3] += h;
 }

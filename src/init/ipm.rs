@@ -72,7 +72,7 @@ impl Cams {
                 list.push(CamView {
                     frame: fi,
                     view: vi,
-                    world_to_cam: rigid_inverse(&mul(&f.vehicle_to_world, &c.camera_to_vehicle)),
+                    world_to_cam: rigid_inverse(&mul(f.view_pose(v), &c.camera_to_vehicle)),
                     fx: c.fx,
                     fy: c.fy,
                     cx: c.cx,

@@ -18,7 +18,7 @@ pub fn view_camera(
     let f = m.frames.get(frame)?;
     let v = f.views.get(view)?;
     let cam = m.camera(&v.camera)?;
-    let c2w = mul(&f.vehicle_to_world, &cam.camera_to_vehicle);
+    let c2w = mul(f.view_pose(v), &cam.camera_to_vehicle);
     // World-to-camera: Rᵀ (p − t), with p = p_local + origin.
     let mut w2c = [[0.0f32; 4]; 3];
     for (i, row) in w2c.iter_mut().enumerate() {

@@ -76,6 +76,12 @@ pub struct SynthConfig {
     pub corridor_half_width: f64,
     /// Cell of the true heightfield raster (m).
     pub field_cell: f64,
+    /// Camera c fires `c · camera_stagger_s` seconds after the frame's pose (as
+    /// nuScenes cameras fire along the LiDAR sweep); 0: all at once.
+    pub camera_stagger_s: f64,
+    /// With a stagger, write each view's own pose (`views[].vehicle_to_world`); false
+    /// writes only the frames' poses, as if every camera fired with the first.
+    pub view_poses: bool,
 }
 
 impl SynthConfig {
@@ -95,6 +101,8 @@ impl SynthConfig {
             truth_resolution: 0.1,
             corridor_half_width: 6.0,
             field_cell: 0.04,
+            camera_stagger_s: 0.0,
+            view_poses: true,
         };
         match preset {
             Preset::Tiny => base,
@@ -304,6 +312,16 @@ pub fn generate(cfg: &SynthConfig, progress: Progress) -> Result<SynthOutput, St
         })
         .collect();
 
+    // Where each camera fired: its own true vehicle pose (and the frame's noise).
+    let s0 = cfg.start_s();
+    let fired = |k: usize, c: usize| -> Mat4Rows {
+        if cfg.camera_stagger_s == 0.0 || c == 0 {
+            return true_poses[k];
+        }
+        let s =
+            s0 + k as f64 * cfg.frame_spacing_m + c as f64 * cfg.camera_stagger_s * cfg.speed_mps;
+        vehicle_pose(&world, s)
+    };
     let views = cfg.frames * cfg.cameras;
     let done = std::sync::atomic::AtomicUsize::new(0);
     let images: Vec<(Vec<u8>, Vec<u8>)> = crate::par::par_map(views, |i| {
@@ -316,7 +334,7 @@ pub fn generate(cfg: &SynthConfig, progress: Progress) -> Result<SynthOutput, St
             fy: cam.fy,
             cx: cam.cx,
             cy: cam.cy,
-            cam_to_world: mul(&true_poses[k], &cam.camera_to_vehicle),
+            cam_to_world: mul(&fired(k, c), &cam.camera_to_vehicle),
         };
         let (rgb, lab) = render(&world, &view, cfg.rays_per_axis, exposures[c]);
         let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
@@ -343,13 +361,17 @@ pub fn generate(cfg: &SynthConfig, progress: Progress) -> Result<SynthOutput, St
     let mut frames = Vec::new();
     for (k, pose) in poses.iter().enumerate() {
         let mut fviews = Vec::new();
-        for cam in &cameras {
+        for (c, cam) in cameras.iter().enumerate() {
             let image = format!("images/{}/{k:06}.png", cam.name);
             let label = format!("labels/{}/{k:06}.png", cam.name);
+            // The view's own pose with the frame's noise: noisy · true⁻¹ · fired.
+            let own = (cfg.view_poses && cfg.camera_stagger_s != 0.0 && c > 0)
+                .then(|| mul(&mul(pose, &rig::inverse(&true_poses[k])), &fired(k, c)));
             fviews.push(View {
                 camera: cam.name.clone(),
                 image,
                 label,
+                vehicle_to_world: own,
             });
         }
         let lidar = cfg.lidar.then(|| format!("lidar/{k:06}.bin"));

@@ -49,6 +49,35 @@ pub async fn start_reconstruction(
     bytes: Vec<u8>,
     settings: JsValue,
 ) -> Result<Reconstruction, JsValue> {
+    let bundle = Bundle::from_zip_bytes(bytes, Limits::default()).map_err(err)?;
+    start(bundle, settings).await
+}
+
+/// Several drives of the same streets (zip bytes each, with their names for
+/// messages) merged into one map, as `rogs reconstruct a.zip b.zip` does.
+#[wasm_bindgen]
+pub async fn start_reconstruction_drives(
+    drives: js_sys::Array,
+    names: Vec<String>,
+    settings: JsValue,
+) -> Result<Reconstruction, JsValue> {
+    let mut bundles = Vec::new();
+    for (k, d) in drives.iter().enumerate() {
+        let bytes = js_sys::Uint8Array::new(&d).to_vec();
+        let b = Bundle::from_zip_bytes(bytes, Limits::default()).map_err(|e| {
+            let name = names
+                .get(k)
+                .cloned()
+                .unwrap_or_else(|| format!("drive {}", k + 1));
+            err(format!("{name}: {e}"))
+        })?;
+        bundles.push(b);
+    }
+    let bundle = Bundle::merge(bundles, &names).map_err(err)?;
+    start(bundle, settings).await
+}
+
+async fn start(mut bundle: Bundle, settings: JsValue) -> Result<Reconstruction, JsValue> {
     let s: Settings = if settings.is_undefined() || settings.is_null() {
         Settings::default()
     } else {
@@ -58,7 +87,6 @@ pub async fn start_reconstruction(
         None => crate::export::ply::Up::Z,
         Some(u) => u.parse().map_err(err)?,
     };
-    let mut bundle = Bundle::from_zip_bytes(bytes, Limits::default()).map_err(err)?;
     let mut c = ReconstructConfig::default();
     // The page defaults coarser than the paper's 5 cm so that the demo runs in a
     // minute or two on a CPU; the settings panel says so.

@@ -110,7 +110,25 @@ function showSummary(s, source) {
   $('summary').hidden = false;
 }
 
-async function openBytes(bytes, source) {
+// The drives of the map being prepared: one bundle, or several of the same streets
+// (drop several, or "Add another drive"), merged into one map by the engine.
+let drives = [];
+
+function showDrives() {
+  const dl = $('summary-facts');
+  dl.querySelector('[data-fact="drives"]')?.previousElementSibling?.remove();
+  dl.querySelector('[data-fact="drives"]')?.remove();
+  if (drives.length < 2) return;
+  const dt = document.createElement('dt');
+  dt.textContent = 'drives';
+  const dd = document.createElement('dd');
+  dd.dataset.fact = 'drives';
+  dd.textContent = drives.map((d) => `${d.name} (${d.summary.frames} frames, ${d.summary.trajectory_length_m.toFixed(1)} m)`).join(' + ')
+    + ': merged into one map when you press Optimise';
+  dl.prepend(dt, dd);
+}
+
+async function openBytes(bytes, source, add = false) {
   await engineReady;
   setStatus(`Checking ${source}…`);
   // Let the status paint before the (synchronous) validation runs.
@@ -118,11 +136,20 @@ async function openBytes(bytes, source) {
   try {
     const r = inspect_bundle(bytes);
     if (r.status === 'valid') {
-      showSummary(r.summary, source);
-      offerOptimisation(bytes, r.summary.classes);
-      // The corridor the bundle asks for (its importer's), unless changed by hand.
-      $('set-half-width').value = String(r.summary.corridor_half_width_m || 4);
-      setStatus(`${source} is a valid bundle: press Optimise to build its map.`, 'ok');
+      if (add && drives.length) {
+        drives.push({ name: source, bytes, summary: r.summary });
+      } else {
+        drives = [{ name: source, bytes, summary: r.summary }];
+        showSummary(r.summary, source);
+        // The corridor the bundle asks for (its importer's), unless changed by hand.
+        $('set-half-width').value = String(r.summary.corridor_half_width_m || 4);
+      }
+      showDrives();
+      offerOptimisation(drives, r.summary.classes);
+      document.body.dataset.drives = String(drives.length);
+      setStatus(drives.length > 1
+        ? `${drives.length} drives ready (${drives.map((d) => d.name).join(', ')}): press Optimise to build one map of them.`
+        : `${source} is a valid bundle: press Optimise to build its map.`, 'ok');
     } else {
       showProblems(r.problems);
       $('optimise').hidden = true;
@@ -133,7 +160,7 @@ async function openBytes(bytes, source) {
   }
 }
 
-async function openFile(file) {
+async function openFile(file, add = false) {
   if (!file) return;
   // Map files open in review, read lazily; everything else is a bundle.
   if (/\.rogsmap$/i.test(file.name) || await isMapFile(blobSource(file))) {
@@ -144,7 +171,7 @@ async function openFile(file) {
   $('map-problems').hidden = true;
   try {
     const bytes = new Uint8Array(await file.arrayBuffer());
-    await openBytes(bytes, file.name);
+    await openBytes(bytes, file.name, add);
   } catch (e) {
     setStatus(`Could not read ${file.name}: ${e}`, 'error');
   }
@@ -195,6 +222,10 @@ async function openUrl(url) {
 
 function wireInputs() {
   $('picker').addEventListener('change', (e) => openFile(e.target.files[0]));
+  $('add-drive').addEventListener('change', async (e) => {
+    for (const f of e.target.files) await openFile(f, true);
+    e.target.value = '';
+  });
   $('demo').addEventListener('click', () => openUrl('demo/demo.zip'));
   $('demo-map').addEventListener('click', () => openReview(null, { url: 'demo/demo-truth.rogsmap' }));
 
@@ -215,8 +246,9 @@ function wireInputs() {
     e.preventDefault();
     depth = 0;
     overlay.hidden = true;
-    const file = e.dataTransfer && e.dataTransfer.files[0];
-    if (file) openFile(file);
+    const files = e.dataTransfer ? [...e.dataTransfer.files] : [];
+    // Several bundles dropped at once are drives of one map.
+    if (files.length) (async () => { for (const [i, f] of files.entries()) await openFile(f, i > 0); })();
     else setStatus('Nothing to open: drop a bundle (.zip) or a map (.rogsmap).', 'error');
   });
 }

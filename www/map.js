@@ -1,7 +1,7 @@
 // The optimisation panel and the map viewer: runs the engine step by step (yielding
 // to the browser between steps so the page stays responsive), then shows the BEV
 // layers on a canvas with pan, zoom, visibility and opacity, and offers the exports.
-import { start_reconstruction } from './pkg/rogs.js';
+import { start_reconstruction, start_reconstruction_drives } from './pkg/rogs.js';
 import { createGpuView } from './gpu-view.js';
 import { openReview, setFrameViewer } from './review.js';
 
@@ -10,13 +10,13 @@ const LAYERS = ['rgb', 'semantic', 'elevation', 'confidence', 'density', 'error'
 // Drawn in this order, the trajectory on top.
 const ORDER = [...LAYERS, 'trajectory'];
 let gpuView = null; // the WebGPU renderer of the map canvas, or null for 2D
-let bundleBytes = null;
+let drives = []; // [{ name, bytes }]: one bundle, or several drives of one map
 let classes = [];
 let run = null; // { rec, paused, stopped }
 const view = { scale: 1, x: 0, y: 0, layers: {} };
 
-export function offerOptimisation(bytes, bundleClasses) {
-  bundleBytes = bytes;
+export function offerOptimisation(list, bundleClasses) {
+  drives = list;
   classes = bundleClasses || [];
   $('optimise').hidden = false;
   $('run').disabled = false;
@@ -65,7 +65,9 @@ async function optimise(setStatus) {
   setStatus('Preparing surfels on the GPU…');
   let rec;
   try {
-    rec = await start_reconstruction(bundleBytes, settings());
+    rec = drives.length > 1
+      ? await start_reconstruction_drives(drives.map((d) => d.bytes), drives.map((d) => d.name), settings())
+      : await start_reconstruction(drives[0].bytes, settings());
   } catch (e) {
     setStatus(`Could not start: ${e}`, 'error');
     $('run').disabled = false;

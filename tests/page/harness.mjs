@@ -45,12 +45,19 @@ export async function openPage(query = '') {
 }
 
 export async function drop(page, file, name = file) {
-  const b64 = fs.readFileSync(path.join(fixtures, file)).toString('base64');
-  const dt = await page.evaluateHandle(({ b64, name }) => {
-    const bytes = Uint8Array.from(atob(b64), (c) => c.charCodeAt(0));
+  await dropMany(page, [[file, name]]);
+}
+
+// Drops several fixture files at once: [[file, name as dropped], …].
+export async function dropMany(page, list) {
+  const items = list.map(([file, name]) => ({ b64: fs.readFileSync(path.join(fixtures, file)).toString('base64'), name }));
+  const dt = await page.evaluateHandle((items) => {
     const t = new DataTransfer();
-    t.items.add(new File([bytes], name, { type: 'application/zip' }));
+    for (const { b64, name } of items) {
+      const bytes = Uint8Array.from(atob(b64), (c) => c.charCodeAt(0));
+      t.items.add(new File([bytes], name, { type: 'application/zip' }));
+    }
     return t;
-  }, { b64, name });
+  }, items);
   await page.dispatchEvent('body', 'drop', { dataTransfer: dt });
 }

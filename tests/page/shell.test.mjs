@@ -4,7 +4,7 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import path from 'node:path';
-import { env, useBrowser, openPage, drop, fixtures, shots } from './harness.mjs';
+import { env, useBrowser, openPage, drop, dropMany, fixtures, shots } from './harness.mjs';
 
 useBrowser();
 
@@ -205,6 +205,24 @@ test('the rasteriser benchmark runs in the page (scripts/bench-raster-page.mjs)'
     const bytes = new Uint8Array(await (await fetch('/demo/demo.zip')).arrayBuffer());
     return m.bench_raster(bytes, 100000, 0, 1, 0.1);
   }), /no frame 100000/);
+  assert.deepEqual(errors, []);
+  await page.close();
+});
+
+test('two drives dropped together make one map', async () => {
+  const { page, errors } = await openPage();
+  await dropMany(page, [['valid.zip', 'a.zip'], ['valid.zip', 'b.zip']]);
+  await page.waitForSelector('body[data-drives="2"]');
+  assert.match(await page.textContent('dd[data-fact="drives"]'), /a\.zip \(3 frames.*\+ b\.zip/);
+  assert.match(await page.textContent('#status'), /2 drives ready/);
+  await page.selectOption('#set-resolution', '0.2');
+  await page.click('#run');
+  await page.waitForSelector('#viewer:not([hidden]) #exports a', { timeout: 170_000 });
+  const drives = await page.evaluate(async () => {
+    const a = [...document.querySelectorAll('#exports a')].find((x) => x.download === 'report.json');
+    return (await (await fetch(a.href)).json()).drives;
+  });
+  assert.deepEqual(drives.map((d) => d.name), ['a.zip', 'b.zip']);
   assert.deepEqual(errors, []);
   await page.close();
 });

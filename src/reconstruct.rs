@@ -351,13 +351,16 @@ impl Session {
     /// The BEV geometry: the truth raster's when the bundle has one, else the grid's
     /// bounding box at the grid resolution.
     pub fn geometry(&self, truth: Option<&BevRaster>) -> BevGeometry {
+        let corridor = BevGeometry::around(
+            (0..self.grid.len()).map(|k| self.grid.xy(k)),
+            self.grid.resolution,
+            self.grid.resolution,
+        );
         match truth {
-            Some(t) => BevGeometry::of_raster(t),
-            None => BevGeometry::around(
-                (0..self.grid.len()).map(|k| self.grid.xy(k)),
-                self.grid.resolution,
-                self.grid.resolution,
-            ),
+            // The truth's grid, grown where the corridor leaves it (merged drives,
+            // whose truth is the first drive's).
+            Some(t) => BevGeometry::of_raster(t).covering(&corridor),
+            None => corridor,
         }
     }
 

@@ -357,3 +357,67 @@ fn lidar_pseudo_ground_truth_agrees_with_bev_truth() {
         "label agreement {agree}/{both}"
     );
 }
+
+/// `revisit`: drive 2 is the same road (one world frame, the same heights), 40 % of a
+/// trajectory further on, a day later, with its own pose noise, cars and exposures.
+#[test]
+fn revisit_drives_share_the_road_and_differ_in_the_rest() {
+    use rogs::synth::world_and_poses;
+    let drive = |d: usize| {
+        let mut c = SynthConfig::preset(Preset::Revisit, 1);
+        c.drive = d;
+        c.noise = PoseNoise {
+            translation_m: 0.05,
+            rotation_deg: 0.5,
+            drift_m: 0.05,
+        };
+        c
+    };
+    let (c1, c2) = (drive(1), drive(2));
+    let (w1, p1) = world_and_poses(&c1, &quiet);
+    let (w2, p2) = world_and_poses(&c2, &quiet);
+    let lt = c1.trajectory_length();
+    let dx = p2[0][0][3] - p1[0][0][3];
+    assert!((dx - 0.4 * lt).abs() < 0.5, "drive 2 starts {dx} m on");
+    // The same road: heights agree wherever neither drive parked a car.
+    for k in 0..20 {
+        let (x, y) = (p2[k][0][3], p2[k][1][3] + 1.0);
+        let (a, b) = (w1.field.height(x, y), w2.field.height(x, y));
+        assert_eq!(a, b, "height at ({x}, {y})");
+    }
+    assert_ne!(
+        w1.occluders
+            .iter()
+            .map(|o| format!("{o:?}"))
+            .collect::<Vec<_>>(),
+        w2.occluders
+            .iter()
+            .map(|o| format!("{o:?}"))
+            .collect::<Vec<_>>(),
+        "other parked cars"
+    );
+    let mut small = |c: &mut SynthConfig| {
+        c.frames = 3;
+        c.width = 48;
+        c.height = 27;
+        c.rays_per_axis = 1;
+    };
+    let (mut s1, mut s2) = (c1.clone(), c2.clone());
+    small(&mut s1);
+    small(&mut s2);
+    let (o1, o2) = (
+        generate(&s1, &quiet).expect("d1"),
+        generate(&s2, &quiet).expect("d2"),
+    );
+    assert!(o2.manifest.frames[0].timestamp - o1.manifest.frames[0].timestamp > 80_000.0);
+    assert!(
+        o2.manifest.name.ends_with("drive 2"),
+        "{}",
+        o2.manifest.name
+    );
+    // Its own pose noise: the written poses' errors differ from drive 1's.
+    let err = |o: &rogs::synth::SynthOutput| {
+        o.manifest.frames[0].vehicle_to_world[2][3] - o.true_poses[0][2][3]
+    };
+    assert_ne!(err(&o1), err(&o2));
+}

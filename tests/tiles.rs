@@ -303,3 +303,44 @@ fn two_drives_of_one_street_make_one_map_and_drives_apart_are_refused() {
         "{e}"
     );
 }
+
+/// A merged map's geometry: the first drive's truth grid grown to every drive's
+/// corridor, on the same pixel grid, and left alone when it already covers it.
+#[test]
+fn the_truth_grid_grows_to_cover_every_drive() {
+    use rogs::bev::BevGeometry;
+    let g = BevGeometry {
+        origin: [0.0, 10.0],
+        resolution: 0.5,
+        width: 20,
+        height: 20,
+    };
+    let inner = BevGeometry::around([[2.0, 2.0], [8.0, 8.0]].into_iter(), 0.5, 0.5);
+    assert_eq!(g.covering(&inner), g);
+    let other = BevGeometry::around([[-1.2, 3.0], [12.3, 11.0]].into_iter(), 0.5, 0.0);
+    let c = g.covering(&other);
+    assert_eq!(c.resolution, 0.5);
+    // The same grid: the origin moved by whole pixels.
+    for (a, b) in c.origin.iter().zip(g.origin) {
+        let px = (a - b) / 0.5;
+        assert!((px - px.round()).abs() < 1e-9, "{:?}", c.origin);
+    }
+    let edges = |g: &BevGeometry| {
+        let r = g.resolution;
+        [
+            g.origin[0],
+            g.origin[0] + g.width as f64 * r,
+            g.origin[1] - g.height as f64 * r,
+            g.origin[1],
+        ]
+    };
+    let (e, o) = (edges(&c), edges(&other));
+    assert!(
+        e[0] <= o[0] && e[1] >= o[1] && e[2] <= o[2] && e[3] >= o[3],
+        "{e:?} covers {o:?}"
+    );
+    assert!(
+        e[0] > o[0] - 0.5 && e[1] < o[1] + 0.5,
+        "grown by less than a pixel too many"
+    );
+}

@@ -50,6 +50,31 @@ impl BevGeometry {
         }
     }
 
+    /// This geometry grown, on its own pixel grid, to cover `other` too (unchanged
+    /// when it already does): the truth of one drive extended to a merged map's
+    /// corridor, so that the map covers every drive and is still scored pixel for
+    /// pixel where the truth is.
+    pub fn covering(&self, other: &BevGeometry) -> Self {
+        let r = self.resolution;
+        let (x0, y1) = (self.origin[0], self.origin[1]);
+        let (x1, y0) = (x0 + self.width as f64 * r, y1 - self.height as f64 * r);
+        let (ox0, oy1) = (other.origin[0], other.origin[1]);
+        let (ox1, oy0) = (
+            ox0 + other.width as f64 * other.resolution,
+            oy1 - other.height as f64 * other.resolution,
+        );
+        // Whole pixels added on each side.
+        let grow = |d: f64| if d > 1e-9 { (d / r).ceil() } else { 0.0 };
+        let (west, east) = (grow(x0 - ox0), grow(ox1 - x1));
+        let (north, south) = (grow(oy1 - y1), grow(y0 - oy0));
+        Self {
+            origin: [x0 - west * r, y1 + north * r],
+            resolution: r,
+            width: self.width + (west + east) as u32,
+            height: self.height + (north + south) as u32,
+        }
+    }
+
     pub fn of_raster(r: &BevRaster) -> Self {
         Self {
             origin: r.origin,

@@ -11,8 +11,9 @@ use std::sync::Mutex;
 #[derive(clap::Args)]
 pub struct Args {
     /// tiny (unit tests, 1 camera 64×48), demo (3 cameras, ~25 m), nuscenes-like
-    /// (6 cameras at 800×225, 240 frames, ~200 m) or highway (3.7 km of gently curving
-    /// road, one 1241×376 camera; see --length-m).
+    /// (6 cameras at 800×225, 240 frames, ~200 m), highway (3.7 km of gently curving
+    /// road, one 1241×376 camera; see --length-m) or revisit (demo's rig, several
+    /// drives of one road: see --drive).
     #[arg(long, default_value = "tiny")]
     preset: Preset,
     /// Random seed: the same seed and settings give the same bundle, byte for byte.
@@ -47,6 +48,11 @@ pub struct Args {
     /// Number of frames.
     #[arg(long)]
     frames: Option<usize>,
+    /// Which drive of the revisit preset (1, 2, …): later drives start further on,
+    /// a day later, with other exposures, parked cars and pose noise, in the same
+    /// world frame; `rogs reconstruct d1.zip d2.zip` merges them.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=16))]
+    drive: u64,
     /// Camera k fires k × this many milliseconds after the frame's pose (as nuScenes
     /// cameras fire along the LiDAR sweep); each view then carries its own pose.
     #[arg(long, default_value_t = 0.0)]
@@ -84,6 +90,10 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
     cfg.cameras = a.cameras.unwrap_or(cfg.cameras);
     cfg.frames = a.frames.unwrap_or(cfg.frames);
     cfg.camera_stagger_s = a.camera_stagger_ms / 1000.0;
+    cfg.drive = a.drive as usize;
+    if cfg.drive > 1 && cfg.preset != Preset::Revisit {
+        return Err("--drive is for --preset revisit (other presets have one drive)".into());
+    }
     cfg.view_poses = !a.no_view_poses;
     if let Some(m) = a.length_m {
         if !(m.is_finite() && m > 0.0) {

@@ -38,6 +38,11 @@ pub enum Preset {
     /// forward camera at KITTI's 1241×376, a frame every metre, 10 cm height field.
     /// For scaling runs (`--length-m` shortens it) and map-viewer benchmarks.
     Highway,
+    /// `demo`'s rig on a road twice as long, driven several times (`drive` 1, 2, …):
+    /// each drive starts 40 % of a trajectory further on, at another time, with
+    /// other camera exposures, other parked cars and other pose noise, in one world
+    /// frame: several drives of the same streets for one map.
+    Revisit,
 }
 
 impl std::str::FromStr for Preset {
@@ -48,8 +53,9 @@ impl std::str::FromStr for Preset {
             "demo" => Ok(Preset::Demo),
             "nuscenes-like" => Ok(Preset::NuscenesLike),
             "highway" => Ok(Preset::Highway),
+            "revisit" => Ok(Preset::Revisit),
             _ => Err(format!(
-                "unknown preset {s:?}; expected tiny, demo, nuscenes-like or highway"
+                "unknown preset {s:?}; expected tiny, demo, nuscenes-like, highway or revisit"
             )),
         }
     }
@@ -82,6 +88,8 @@ pub struct SynthConfig {
     /// With a stagger, write each view's own pose (`views[].vehicle_to_world`); false
     /// writes only the frames' poses, as if every camera fired with the first.
     pub view_poses: bool,
+    /// Which drive of a `revisit` scene (1, 2, …); other presets have one.
+    pub drive: usize,
 }
 
 impl SynthConfig {
@@ -103,6 +111,7 @@ impl SynthConfig {
             field_cell: 0.04,
             camera_stagger_s: 0.0,
             view_poses: true,
+            drive: 1,
         };
         match preset {
             Preset::Tiny => base,
@@ -125,6 +134,14 @@ impl SynthConfig {
                 field_cell: 0.05,
                 ..base
             },
+            Preset::Revisit => SynthConfig {
+                frames: 26,
+                cameras: 3,
+                width: 192,
+                height: 108,
+                truth_resolution: 0.05,
+                ..base
+            },
             Preset::Highway => SynthConfig {
                 frames: 3701,
                 width: 1241,
@@ -145,9 +162,23 @@ impl SynthConfig {
         (self.frames.max(2) - 1) as f64 * self.frame_spacing_m
     }
 
-    /// Arc length where the trajectory starts (room behind for rear cameras).
+    /// Arc length where the trajectory starts (room behind for rear cameras); later
+    /// drives of `revisit` start 40 % of a trajectory further on each.
     fn start_s(&self) -> f64 {
-        20.0
+        ROAD_START + self.drive.saturating_sub(1) as f64 * 0.4 * self.trajectory_length()
+    }
+
+    /// The trajectory length the road is built for: `revisit`'s holds three drives.
+    fn road_trajectory_length(&self) -> f64 {
+        match self.preset {
+            Preset::Revisit => 2.0 * self.trajectory_length(),
+            _ => self.trajectory_length(),
+        }
+    }
+
+    /// A random stream of this drive (the first drive's are the preset's own).
+    fn drive_rng(&self, rng: &Rng, key: u64) -> Rng {
+        rng.fork(key + 0x1000 * self.drive.saturating_sub(1) as u64)
     }
 }
 
@@ -171,11 +202,14 @@ const RIG: [(&str, f64, [f64; 3], f64); 6] = [
     ("back_right", -110.0, [1.0, -0.6, 1.5], 64.0),
 ];
 
+/// Arc length of the first drive's first pose.
+const ROAD_START: f64 = 20.0;
+
 /// The road for a config: straights and arcs (and a 90° turn on long scenes), a speed
 /// table, a crosswalk with stop line and a manhole where the cameras see them.
 pub fn road_spec(cfg: &SynthConfig) -> RoadSpec {
-    let s0 = cfg.start_s();
-    let lt = cfg.trajectory_length();
+    let s0 = ROAD_START;
+    let lt = cfg.road_trajectory_length();
     let total = s0 + lt + 45.0;
     let pieces = if cfg.preset == Preset::Highway {
         // Curves of 12 km radius: over 3.7 km the road drifts about 100 m sideways,
@@ -230,10 +264,16 @@ pub fn world_and_poses(cfg: &SynthConfig, progress: Progress) -> (World, Vec<Mat
     let s0 = cfg.start_s();
     let lt = cfg.trajectory_length();
     let mut cars = Vec::new();
-    let mut crng = rng.fork(0xca5);
-    let mut s = s0 + 0.5 * lt.min(30.0) + 4.0;
+    // Parked cars along the trajectory (`revisit`: along the whole road, other cars
+    // on every drive).
+    let (c0, lc) = match cfg.preset {
+        Preset::Revisit => (ROAD_START, cfg.road_trajectory_length()),
+        _ => (s0, lt),
+    };
+    let mut crng = cfg.drive_rng(&rng, 0xca5);
+    let mut s = c0 + 0.5 * lc.min(30.0) + 4.0;
     let mut side = 1.0;
-    while s < s0 + lt + 30.0 {
+    while s < c0 + lc + 30.0 {
         let albedo = [
             0.1 + 0.7 * crng.uniform(),
             0.1 + 0.5 * crng.uniform(),
@@ -272,7 +312,13 @@ pub fn generate(cfg: &SynthConfig, progress: Progress) -> Result<SynthOutput, St
     }
     let rng = Rng::new(cfg.seed);
     let (world, true_poses) = world_and_poses(cfg, progress);
-    let poses = noisy_poses(&true_poses, cfg.noise, &rng);
+    // Each drive's own pose noise (the first drive's is the preset's).
+    let nrng = if cfg.drive > 1 {
+        cfg.drive_rng(&rng, 0xd0)
+    } else {
+        rng.clone()
+    };
+    let poses = noisy_poses(&true_poses, cfg.noise, &nrng);
     let cameras: Vec<Camera> = RIG[..cfg.cameras]
         .iter()
         .map(|&(name, yaw, pos, hfov)| {
@@ -294,11 +340,11 @@ pub fn generate(cfg: &SynthConfig, progress: Progress) -> Result<SynthOutput, St
             }
         })
         .collect();
-    let mut erng = rng.fork(0xe0);
+    let mut erng = cfg.drive_rng(&rng, 0xe0);
     let exposures: Vec<Exposure> = (0..cfg.cameras)
         .map(|c| {
             let (g, o) = (erng.uniform(), erng.uniform());
-            if c == 0 {
+            if c == 0 && cfg.drive <= 1 {
                 Exposure {
                     gain: 1.0,
                     offset: 0.0,
@@ -376,7 +422,9 @@ pub fn generate(cfg: &SynthConfig, progress: Progress) -> Result<SynthOutput, St
         }
         let lidar = cfg.lidar.then(|| format!("lidar/{k:06}.bin"));
         frames.push(Frame {
-            timestamp: k as f64 * cfg.frame_spacing_m / cfg.speed_mps,
+            // Later drives of `revisit` are a day apart each.
+            timestamp: k as f64 * cfg.frame_spacing_m / cfg.speed_mps
+                + 86_400.0 * cfg.drive.saturating_sub(1) as f64,
             vehicle_to_world: *pose,
             views: fviews,
             lidar,
@@ -420,7 +468,12 @@ pub fn generate(cfg: &SynthConfig, progress: Progress) -> Result<SynthOutput, St
     let manifest = Manifest {
         format: FORMAT.into(),
         version: VERSION,
-        name: format!("synthetic {:?} (seed {})", cfg.preset, cfg.seed),
+        name: match cfg.preset {
+            Preset::Revisit => {
+                format!("synthetic Revisit (seed {}), drive {}", cfg.seed, cfg.drive)
+            }
+            _ => format!("synthetic {:?} (seed {})", cfg.preset, cfg.seed),
+        },
         vehicle_height_m: 0.0,
         semantic_classes: classes::table(),
         cameras,

@@ -477,14 +477,13 @@ impl TiledRun {
                     return Err(ReconstructError::NoViews);
                 }
                 run.planned_steps = run.tiles.iter().map(|t| per_tile(t.views.len())).sum();
+                let res = run.cfg.prepare.grid.resolution;
+                let hw = run.cfg.prepare.grid.half_width;
+                let pts = PosePlanes::from_manifest(&b.manifest).ground;
+                let corridor = BevGeometry::around(pts.iter().map(|g| [g[0], g[1]]), res, hw + res);
                 run.geometry = match &run.truth {
-                    Some(t) => BevGeometry::of_raster(t),
-                    None => {
-                        let res = run.cfg.prepare.grid.resolution;
-                        let hw = run.cfg.prepare.grid.half_width;
-                        let pts = PosePlanes::from_manifest(&b.manifest).ground;
-                        BevGeometry::around(pts.iter().map(|g| [g[0], g[1]]), res, hw + res)
-                    }
+                    Some(t) => BevGeometry::of_raster(t).covering(&corridor),
+                    None => corridor,
                 };
                 run.model_origin = [run.geometry.origin[0], run.geometry.origin[1], 0.0];
             }

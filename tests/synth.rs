@@ -380,8 +380,8 @@ fn revisit_drives_share_the_road_and_differ_in_the_rest() {
     let dx = p2[0][0][3] - p1[0][0][3];
     assert!((dx - 0.4 * lt).abs() < 0.5, "drive 2 starts {dx} m on");
     // The same road: heights agree wherever neither drive parked a car.
-    for k in 0..20 {
-        let (x, y) = (p2[k][0][3], p2[k][1][3] + 1.0);
+    for p in p2.iter().take(20) {
+        let (x, y) = (p[0][3], p[1][3] + 1.0);
         let (a, b) = (w1.field.height(x, y), w2.field.height(x, y));
         assert_eq!(a, b, "height at ({x}, {y})");
     }
@@ -396,7 +396,7 @@ fn revisit_drives_share_the_road_and_differ_in_the_rest() {
             .collect::<Vec<_>>(),
         "other parked cars"
     );
-    let mut small = |c: &mut SynthConfig| {
+    let small = |c: &mut SynthConfig| {
         c.frames = 3;
         c.width = 48;
         c.height = 27;

@@ -521,7 +521,7 @@ fn nuscenes_fixture_poses_calibrations_lidar_and_labels_come_out_exactly() {
     assert!(
         done.warnings
             .iter()
-            .any(|w| w.contains("CAM_FRONT's ego pose")),
+            .any(|w| w.contains("each view carries its own ego pose")),
         "{:?}",
         done.warnings
     );

@@ -318,7 +318,36 @@ function showMap(rec, report) {
   showCameraView();
 }
 
+// The finished map's georeference (bev.json), or null while optimising.
+let geoCache = null;
+function mapGeo() {
+  if (!view.rec) return null;
+  if (geoCache && geoCache.rec === view.rec) return geoCache.geo;
+  let geo = null;
+  try { geo = JSON.parse(new TextDecoder().decode(view.rec.file('bev.json'))); } catch { return null; }
+  geoCache = { rec: view.rec, geo };
+  return geo;
+}
+
+// The scale bar under the map: a round length about 100 CSS pixels long.
+function drawScale() {
+  const canvas = $('map');
+  const rec = view.rec;
+  const bar = $('map-scale');
+  if (!rec) { bar.hidden = true; return; }
+  const r = canvas.getBoundingClientRect();
+  const mPerCss = rec.resolution() / (view.scale * (r.width / canvas.width || 1));
+  const target = 100 * mPerCss;
+  const e = 10 ** Math.floor(Math.log10(target));
+  const len = [5, 2, 1].map((f) => f * e).find((v) => v <= target) || e;
+  bar.hidden = false;
+  bar.querySelector('div').style.width = `${Math.round(len / mPerCss)}px`;
+  bar.querySelector('span').textContent = len >= 1 ? `${len} m` : `${Math.round(len * 100)} cm`;
+  bar.dataset.metres = String(len);
+}
+
 function draw() {
+  drawScale();
   const canvas = $('map');
   if (gpuView) {
     gpuView.draw(ORDER, view.layers, view);
@@ -388,7 +417,12 @@ export function wireMap(setStatus) {
     const mx = (e.clientX - r.left) * (canvas.width / r.width), my = (e.clientY - r.top) * (canvas.height / r.height);
     const px = Math.floor((mx - view.x) / view.scale), py = Math.floor((my - view.y) / view.scale);
     const z = view.rec && px >= 0 && py >= 0 ? view.rec.elevation_at(px, py) : undefined;
-    $('cursor').textContent = z === undefined ? '' : `elevation under the cursor: ${z.toFixed(3)} m`;
+    // x, y in the map's world frame once bev.json (the georeference) exists.
+    const geo = mapGeo();
+    const xy = geo && px >= 0 && py >= 0
+      ? `x ${(geo.origin[0] + (px + 0.5) * geo.resolution).toFixed(2)} m, y ${(geo.origin[1] - (py + 0.5) * geo.resolution).toFixed(2)} m · `
+      : '';
+    $('cursor').textContent = z === undefined ? '' : `${xy}elevation under the cursor: ${z.toFixed(3)} m`;
     if (!drag) return;
     view.x += e.clientX - drag.x; view.y += e.clientY - drag.y;
     drag = { x: e.clientX, y: e.clientY };

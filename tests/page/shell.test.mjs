@@ -108,6 +108,10 @@ test('the demo optimises in the page; layers, pan, zoom and exports work; errors
   await page.locator('#map').scrollIntoViewIfNeeded();
   const box = await page.locator('#map').boundingBox();
   await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
+  // The value under the cursor with its x, y in the map frame, and a scale bar.
+  await page.waitForFunction(() => /^x -?\d+\.\d\d m, y -?\d+\.\d\d m · elevation/.test(document.getElementById('cursor').textContent));
+  const bar = Number(await page.getAttribute('#map-scale', 'data-metres'));
+  assert.ok(bar > 0, `scale bar ${bar} m`);
   await page.mouse.wheel(0, -300);
   const zoomed = await page.getAttribute('#map', 'data-view');
   assert.notEqual(zoomed, before);

@@ -4,13 +4,7 @@
 # is (docs/PUBLISH.md). Prints the wasm's size, raw and gzipped.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash scripts/setup.sh
-. scripts/env.sh
-echo "build: the engine for the browser (wasm, release)…"
-wasm-pack build --release --target web --out-dir www/pkg --mode no-install --no-typescript --no-pack
-if [ ! -f www/demo/demo.zip ] || [ ! -f www/demo/demo-truth.rogsmap ]; then
-  node scripts/make-demo.mjs
-fi
+bash scripts/web.sh
 rm -rf dist
 mkdir -p dist/pkg dist/demo
 cp www/index.html www/style.css www/*.js dist/

@@ -22,24 +22,27 @@ const rv = {
 };
 let setStatus = () => {};
 let frameViewer = null; // (frame) => Promise<void>, set by the optimiser for its own run
-const cache = new Map(); // key → { v, used }
+// Least recently used first: a Map keeps insertion order, and a use re-inserts.
+const cache = new Map(); // key → { v }
 const loading = new Map(); // key → Promise
 const queue = [];
 let inflight = 0;
-let useClock = 0;
 let drawQueued = false;
 
 // ---- tiles: cached, loaded a few at a time, newest requests first -----------------
 function cached(key) {
   const e = cache.get(key);
-  if (e) e.used = ++useClock;
-  return e ? e.v : undefined;
+  if (!e) return undefined;
+  cache.delete(key);
+  cache.set(key, e);
+  return e.v;
 }
 function remember(key, v) {
-  cache.set(key, { v, used: ++useClock });
-  if (cache.size > CACHE_TILES) {
-    const old = [...cache.entries()].sort((x, y) => x[1].used - y[1].used).slice(0, cache.size - CACHE_TILES);
-    for (const [k, e] of old) { e.v?.close?.(); cache.delete(k); }
+  cache.set(key, { v });
+  while (cache.size > CACHE_TILES) {
+    const [k, e] = cache.entries().next().value;
+    e.v?.close?.();
+    cache.delete(k);
   }
 }
 function pump() {

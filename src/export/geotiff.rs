@@ -64,60 +64,55 @@ fn georeference<W: std::io::Write + std::io::Seek, C: colortype::ColorType>(
     Ok(())
 }
 
-fn err(name: &str) -> impl Fn(tiff::TiffError) -> String + '_ {
-    move |e| format!("{name}: {e}")
+/// The one tag that differs between the layers.
+enum Extra<'a> {
+    /// GDAL's no-data value, as text.
+    NoData(&'a str),
+    /// `ExtraSamples`: the fourth sample is unassociated alpha.
+    Alpha,
+}
+
+/// One georeferenced, deflated layer of colour type `C` with its extra tag.
+fn tif<C: colortype::ColorType>(
+    name: &str,
+    data: &[C::Inner],
+    g: &BevGeometry,
+    frame: &str,
+    extra: Extra,
+) -> Result<Vec<u8>, String>
+where
+    [C::Inner]: tiff::encoder::TiffValue,
+{
+    let write = || -> tiff::TiffResult<Vec<u8>> {
+        let mut out = Cursor::new(Vec::new());
+        let mut enc = TiffEncoder::new(&mut out)?
+            .with_compression(Compression::Deflate(DeflateLevel::Balanced));
+        let mut img = enc.new_image::<C>(g.width, g.height)?;
+        georeference(&mut img, g, frame)?;
+        match extra {
+            Extra::NoData(v) => img.encoder().write_tag(Tag::Unknown(GDAL_NODATA), v)?,
+            Extra::Alpha => img
+                .encoder()
+                .write_tag(Tag::Unknown(EXTRA_SAMPLES), &[2u16][..])?,
+        }
+        img.write_data(data)?;
+        Ok(out.into_inner())
+    };
+    write().map_err(|e| format!("{name}: {e}"))
 }
 
 /// Float32 elevation (or any value layer), NaN where empty.
 pub fn float_tif(name: &str, v: &[f32], g: &BevGeometry, frame: &str) -> Result<Vec<u8>, String> {
-    let mut out = Cursor::new(Vec::new());
-    let mut enc = TiffEncoder::new(&mut out)
-        .map_err(err(name))?
-        .with_compression(Compression::Deflate(DeflateLevel::Balanced));
-    let mut img = enc
-        .new_image::<colortype::Gray32Float>(g.width, g.height)
-        .map_err(err(name))?;
-    georeference(&mut img, g, frame).map_err(err(name))?;
-    img.encoder()
-        .write_tag(Tag::Unknown(GDAL_NODATA), "nan")
-        .map_err(err(name))?;
-    img.write_data(v).map_err(err(name))?;
-    Ok(out.into_inner())
+    tif::<colortype::Gray32Float>(name, v, g, frame, Extra::NoData("nan"))
 }
 
 /// RGBA colours, alpha 0 where empty.
 pub fn rgba_tif(name: &str, px: &[u8], g: &BevGeometry, frame: &str) -> Result<Vec<u8>, String> {
-    let mut out = Cursor::new(Vec::new());
-    let mut enc = TiffEncoder::new(&mut out)
-        .map_err(err(name))?
-        .with_compression(Compression::Deflate(DeflateLevel::Balanced));
-    let mut img = enc
-        .new_image::<colortype::RGBA8>(g.width, g.height)
-        .map_err(err(name))?;
-    georeference(&mut img, g, frame).map_err(err(name))?;
-    img.encoder()
-        .write_tag(Tag::Unknown(EXTRA_SAMPLES), &[2u16][..])
-        .map_err(err(name))?;
-    img.write_data(px).map_err(err(name))?;
-    Ok(out.into_inner())
+    tif::<colortype::RGBA8>(name, px, g, frame, Extra::Alpha)
 }
 
 /// Class ids, `SEMANTIC_NODATA` where empty.
 pub fn ids_tif(name: &str, ids: &[u8], g: &BevGeometry, frame: &str) -> Result<Vec<u8>, String> {
-    let mut out = Cursor::new(Vec::new());
-    let mut enc = TiffEncoder::new(&mut out)
-        .map_err(err(name))?
-        .with_compression(Compression::Deflate(DeflateLevel::Balanced));
-    let mut img = enc
-        .new_image::<colortype::Gray8>(g.width, g.height)
-        .map_err(err(name))?;
-    georeference(&mut img, g, frame).map_err(err(name))?;
-    img.encoder()
-        .write_tag(
-            Tag::Unknown(GDAL_NODATA),
-            SEMANTIC_NODATA.to_string().as_str(),
-        )
-        .map_err(err(name))?;
-    img.write_data(ids).map_err(err(name))?;
-    Ok(out.into_inner())
+    let nodata = SEMANTIC_NODATA.to_string();
+    tif::<colortype::Gray8>(name, ids, g, frame, Extra::NoData(&nodata))
 }

@@ -378,7 +378,7 @@ impl<W: std::io::Write + std::io::Seek> Writer<'_, W> {
                 self.class_px[(*v as usize).min(255)] += 1;
             }
         }
-        if let (Some(e), Some(h)) = (value("error").cloned(), self.errors.as_mut()) {
+        if let (Some(e), Some(h)) = (value("error"), self.errors.as_mut()) {
             for v in e.iter().filter(|v| v.is_finite()) {
                 h[((*v as f64 / ERROR_BIN_M) as usize).min(ERROR_BINS - 1)] += 1;
             }

@@ -115,7 +115,8 @@ impl SynthConfig {
         };
         match preset {
             Preset::Tiny => base,
-            Preset::Demo => SynthConfig {
+            // `revisit` drives `demo`'s rig (on a longer road, see `road_spec`).
+            Preset::Demo | Preset::Revisit => SynthConfig {
                 frames: 26,
                 cameras: 3,
                 width: 192,
@@ -132,14 +133,6 @@ impl SynthConfig {
                 truth_resolution: 0.05,
                 corridor_half_width: 8.0,
                 field_cell: 0.05,
-                ..base
-            },
-            Preset::Revisit => SynthConfig {
-                frames: 26,
-                cameras: 3,
-                width: 192,
-                height: 108,
-                truth_resolution: 0.05,
                 ..base
             },
             Preset::Highway => SynthConfig {

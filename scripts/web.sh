@@ -1,0 +1,13 @@
+#!/usr/bin/env bash
+# The page's assets, shared by `npm start` and `npm run build`: installs what is
+# missing, builds the engine for the browser (release) into www/pkg, and makes the
+# demo scene with the wasm engine in Node the first time (no native build needed).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup.sh
+. scripts/env.sh
+echo "web: building the engine for the browser (wasm, release; a few minutes the first time)…"
+wasm-pack build --release --target web --out-dir www/pkg --mode no-install --no-typescript --no-pack
+if [ ! -f www/demo/demo.zip ] || [ ! -f www/demo/demo-truth.rogsmap ]; then
+  node scripts/make-demo.mjs
+fi

@@ -615,7 +615,8 @@ function layerList() {
     li.innerHTML = `<label><input type="checkbox" data-layer="${name}" ${l.on ? 'checked' : ''}> ${label}</label>
       <input type="range" min="0" max="1" step="0.05" value="${l.op}" data-opacity="${name}" aria-label="${label} opacity">`;
     li.querySelector('[data-layer]').addEventListener('change', (e) => { l.on = e.target.checked; changed(true); });
-    li.querySelector('[data-opacity]').addEventListener('input', (e) => { l.op = Number(e.target.value); changed(false); });
+    // While dragging only redraw; the change at the end is the history entry.
+    li.querySelector('[data-opacity]').addEventListener('input', (e) => { l.op = Number(e.target.value); requestDraw(); });
     li.querySelector('[data-opacity]').addEventListener('change', () => changed(true));
     ul.append(li);
   }
@@ -648,8 +649,10 @@ function stateQuery() {
   return q;
 }
 let viewTimer = null;
-// Records the state: a new history entry for a deliberate change, the same entry
-// rewritten for pans and zooms.
+let pendingUrl = null; // the current entry's URL, not yet written (pans, zooms)
+// Records the state: `true` adds a history entry (a deliberate change), `false`
+// rewrites the current one a moment later (pans and zooms), 'now' rewrites it at once.
+// A new entry first writes out the current one, so back returns to where it was.
 function changed(push) {
   requestDraw();
   if (!rv.a) return;
@@ -657,8 +660,11 @@ function changed(push) {
   $('review-link').href = url;
   $('review-link-note').textContent = rv.a.url && (!rv.b || rv.b.url) ? '' : '(maps opened from files are not in the link: open them by ?map=URL to share)';
   clearTimeout(viewTimer);
-  if (push) history.pushState({ review: true }, '', url);
-  else viewTimer = setTimeout(() => history.replaceState({ review: true }, '', url), 250);
+  const flush = () => { if (pendingUrl) history.replaceState({ review: true }, '', pendingUrl); pendingUrl = null; };
+  if (push === true) { flush(); history.pushState({ review: true }, '', url); return; }
+  pendingUrl = url;
+  if (push === 'now') flush();
+  else viewTimer = setTimeout(flush, 250);
 }
 
 function applyQuery(q) {
@@ -757,7 +763,7 @@ export async function openReview(input, { url = null, b = null, query = null, ke
   showCompare();
   updateMeasure();
   updateProfile();
-  changed(!query);
+  changed(query ? 'now' : true);
   const ix = map.index;
   setStatus(`${map.name}: ${ix.width}×${ix.height} px at ${ix.resolution} m (${ix.levels} levels)${map.src.lazy ? ', read tile by tile' : ''}.`, 'ok');
   document.body.dataset.review = 'open';

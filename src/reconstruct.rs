@@ -8,7 +8,9 @@ use crate::bev::{self, BevGeometry, BevImage};
 use crate::bundle::{Bundle, ClassRole, Problem};
 use crate::eval::{BevRaster, Metrics};
 use crate::gpu::{GpuContext, GpuError};
-use crate::init::align::{align_bundle, AlignConfig, AlignSummary};
+use crate::init::align::{
+    align_bundle, align_with_returns, AlignConfig, AlignSummary, GroundReturn,
+};
 use crate::init::prepare::{lidar_world_of, prepare, PrepareConfig, PrepareError, PrepareReport};
 use crate::init::{PoseIndex, PosePlanes};
 use crate::loss::regularise::RegData;
@@ -58,12 +60,41 @@ pub fn align(
     b: &mut Bundle,
     cfg: &ReconstructConfig,
 ) -> Result<Option<AlignSummary>, ReconstructError> {
-    Ok(match &cfg.align {
-        Some(a) if cfg.train.use_lidar && cfg.prepare.use_lidar => {
-            align_bundle(b, a)?.map(|a| AlignSummary::new(&a))
-        }
-        _ => None,
+    align_from(b, cfg, None)
+}
+
+/// As `align`, from the ground returns already gathered when `returns` holds them
+/// (the page gathers them a batch of sweeps at a time from a lazily read bundle).
+pub fn align_from(
+    b: &mut Bundle,
+    cfg: &ReconstructConfig,
+    returns: Option<&[GroundReturn]>,
+) -> Result<Option<AlignSummary>, ReconstructError> {
+    Ok(match (aligns(cfg), returns) {
+        (Some(a), Some(r)) => align_with_returns(b, r, a).map(|a| AlignSummary::new(&a)),
+        (Some(a), None) => align_bundle(b, a)?.map(|a| AlignSummary::new(&a)),
+        (None, _) => None,
     })
+}
+
+/// The alignment `cfg` asks for: only when the LiDAR is in use.
+pub fn aligns(cfg: &ReconstructConfig) -> Option<&AlignConfig> {
+    cfg.align
+        .as_ref()
+        .filter(|_| cfg.train.use_lidar && cfg.prepare.use_lidar)
+}
+
+impl ReconstructError {
+    /// The bundle file this error waits for, when it is only that a lazily read
+    /// bundle has not provided it yet (not a failure: provide it and step again).
+    pub fn not_loaded(&self) -> Option<&str> {
+        match self {
+            Self::Bundle(Problem::NotLoaded { path })
+            | Self::Prepare(PrepareError::Bundle(Problem::NotLoaded { path })) => Some(path),
+            Self::Tile { source, .. } => source.not_loaded(),
+            _ => None,
+        }
+    }
 }
 
 /// World xy of frame `f`'s vehicle.

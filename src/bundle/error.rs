@@ -32,6 +32,8 @@ pub enum Problem {
     },
     #[error("{path}: cannot read it ({reason})")]
     Unreadable { path: String, reason: String },
+    #[error("{path}: not read yet (files of a bundle opened lazily are read as the work needs them; this one was not asked for)")]
+    NotLoaded { path: String },
     #[error("{path}: cannot decode the image ({reason}); expected PNG or JPEG")]
     ImageDecode { path: String, reason: String },
     #[error("{path}: image is {found_w}×{found_h}, expected {expected_w}×{expected_h} (camera {camera:?})")]
@@ -104,6 +106,7 @@ impl Problem {
             FileTooLarge { path, .. }
             | ImageTooLarge { path, .. }
             | Unreadable { path, .. }
+            | NotLoaded { path }
             | ImageDecode { path, .. }
             | ImageSize { path, .. }
             | LabelFormat { path, .. }

@@ -6,6 +6,7 @@
 
 mod error;
 pub mod example;
+mod lazy;
 mod manifest;
 mod merge;
 mod source;
@@ -15,11 +16,14 @@ mod validate;
 mod write;
 
 pub use error::{BundleErrors, Problem};
+pub use lazy::LazyFiles;
 pub use manifest::*;
 pub use merge::DRIVE_GAP_M;
-pub use source::{is_safe_path, Limits, Source, ZipSource};
+pub use source::{is_safe_path, LazyStore, Limits, ReadSeek, Source, ZipSource};
 pub use summary::Summary;
-pub use validate::{check_rigid, decode_label, decode_rgb, image_dims, ROTATION_TOLERANCE};
+pub use validate::{
+    check_rigid, decode_label, decode_rgb, image_dims, validate_views, ROTATION_TOLERANCE,
+};
 #[cfg(not(target_arch = "wasm32"))]
 pub use write::write_dir;
 pub use write::{write_zip, BundleFile, ZipBundleWriter};
@@ -91,13 +95,52 @@ impl Bundle {
             let source = DirSource { root: path.into() };
             return Self::from_source(Box::new(source), limits, progress);
         }
-        let bytes = std::fs::read(path).map_err(|e| {
+        // Read entry by entry from the file: a long drive is never held whole.
+        let file = std::fs::File::open(path).map_err(|e| {
             BundleErrors(vec![Problem::Unreadable {
                 path: path.display().to_string(),
                 reason: e.to_string(),
             }])
         })?;
-        Self::from_zip_bytes_with_progress(bytes, limits, progress)
+        let reader = Box::new(std::io::BufReader::new(file));
+        let source = ZipSource::from_reader(reader, &limits).map_err(BundleErrors)?;
+        Self::from_source(Box::new(source), limits, progress)
+    }
+
+    /// A bundle whose files are held only while needed (the page's lazy reading):
+    /// `store` must hold manifest.json. Validation here is structural (manifest,
+    /// presence, sizes); each view's image and label are checked by
+    /// `validate_views` when they are provided, before any work uses them.
+    pub fn from_store(
+        store: std::sync::Arc<LazyStore>,
+        limits: Limits,
+    ) -> Result<Self, BundleErrors> {
+        let source: Box<dyn Source> = Box::new(store);
+        if source.size(MANIFEST).is_none() {
+            return Err(BundleErrors(vec![Problem::MissingManifest]));
+        }
+        let text = source
+            .read(MANIFEST, &limits)
+            .map_err(|p| BundleErrors(vec![p]))?;
+        let manifest = parse_manifest(&text).map_err(|p| BundleErrors(vec![p]))?;
+        let problems = validate::validate_structure(&manifest, source.as_ref(), &limits);
+        if !problems.is_empty() {
+            return Err(BundleErrors(problems));
+        }
+        Ok(Self::checked(manifest, limits, source))
+    }
+
+    fn checked(manifest: Manifest, limits: Limits, source: Box<dyn Source>) -> Self {
+        let drives = vec![Drive {
+            name: manifest.name.clone(),
+            frames: 0..manifest.frames.len(),
+        }];
+        Self {
+            manifest,
+            limits,
+            drives,
+            source,
+        }
     }
 
     /// Parses the manifest and validates every referenced file.
@@ -117,16 +160,18 @@ impl Bundle {
         if !problems.is_empty() {
             return Err(BundleErrors(problems));
         }
-        let drives = vec![Drive {
-            name: manifest.name.clone(),
-            frames: 0..manifest.frames.len(),
-        }];
-        Ok(Self {
-            manifest,
-            limits,
-            drives,
-            source,
-        })
+        Ok(Self::checked(manifest, limits, source))
+    }
+
+    /// The files of view `view` of frame `frame` (image, label).
+    pub fn view_files(&self, frame: usize, view: usize) -> [&str; 2] {
+        let v = &self.manifest.frames[frame].views[view];
+        [v.image.as_str(), v.label.as_str()]
+    }
+
+    /// Where the files come from.
+    pub fn source(&self) -> &dyn Source {
+        self.source.as_ref()
     }
 
     /// Raw bytes of a file in the bundle.

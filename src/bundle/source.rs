@@ -1,10 +1,14 @@
-//! Where bundle files come from: a zip held in memory (works in wasm) or, natively, a
-//! folder. Both enforce the same resource limits, so that a hostile bundle (a zip
-//! bomb, a path escaping the folder) is refused before anything is inflated.
+//! Where bundle files come from: a zip archive (in memory, or natively read from its
+//! file entry by entry, never whole), natively a folder, or in the page a
+//! `LazyStore` that holds only the files the work at hand needs (the page reads
+//! them from the dropped file as tiles ask for them). All enforce the same resource
+//! limits, so that a hostile bundle (a zip bomb, a path escaping the folder) is
+//! refused before anything is inflated.
 
 use super::error::Problem;
-use std::io::{Cursor, Read};
-use std::sync::Mutex;
+use std::collections::{BTreeMap, HashMap};
+use std::io::{Cursor, Read, Seek};
+use std::sync::{Arc, Mutex};
 
 /// Resource bounds applied while reading a bundle.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -58,16 +62,26 @@ fn too_large(path: &str, size: u64, limits: &Limits) -> Result<(), Problem> {
     Ok(())
 }
 
-/// A zip archive in memory.
+/// What a zip archive can be read from: bytes in memory, or natively its file.
+pub trait ReadSeek: Read + Seek + Send {}
+impl<T: Read + Seek + Send> ReadSeek for T {}
+
+/// A zip archive, read one entry at a time.
 pub struct ZipSource {
-    archive: Mutex<zip::ZipArchive<Cursor<Vec<u8>>>>,
+    archive: Mutex<zip::ZipArchive<Box<dyn ReadSeek>>>,
 }
 
 impl ZipSource {
-    /// Opens the archive and checks every entry name and the declared sizes.
+    /// Opens an archive held in memory.
     pub fn new(bytes: Vec<u8>, limits: &Limits) -> Result<Self, Vec<Problem>> {
-        let mut archive = zip::ZipArchive::new(Cursor::new(bytes))
-            .map_err(|e| vec![Problem::NotZip(e.to_string())])?;
+        Self::from_reader(Box::new(Cursor::new(bytes)), limits)
+    }
+
+    /// Opens the archive and checks every entry name and the declared sizes. Only
+    /// the central directory is read; entries are inflated when they are read.
+    pub fn from_reader(reader: Box<dyn ReadSeek>, limits: &Limits) -> Result<Self, Vec<Problem>> {
+        let mut archive =
+            zip::ZipArchive::new(reader).map_err(|e| vec![Problem::NotZip(e.to_string())])?;
         let mut problems = Vec::new();
         let mut total: u64 = 0;
         for i in 0..archive.len() {
@@ -165,5 +179,123 @@ impl Source for DirSource {
             path: path.into(),
             reason: e.to_string(),
         })
+    }
+}
+
+/// The files of a bundle held only while they are needed: its table of entries
+/// (name → uncompressed size) is known from the start, the bytes arrive through
+/// `provide` and leave through `retain`. Reading a file that is not held is
+/// `Problem::NotLoaded`, never a silent empty file. The page keeps one per dropped
+/// bundle and fills it, tile by tile, from the file on disk (docs/ARCHITECTURE.md).
+#[derive(Default)]
+pub struct LazyStore {
+    sizes: BTreeMap<String, u64>,
+    held: Mutex<HashMap<String, Arc<Vec<u8>>>>,
+}
+
+impl LazyStore {
+    /// A store over the archive's entries (names and uncompressed sizes), checked
+    /// as a zip's are: safe names, each and the total within the limits.
+    pub fn new(entries: Vec<(String, u64)>, limits: &Limits) -> Result<Self, Vec<Problem>> {
+        let mut problems = Vec::new();
+        let mut sizes = BTreeMap::new();
+        let mut total: u64 = 0;
+        for (name, size) in entries {
+            let name = name.trim_end_matches('/').to_string();
+            if name.is_empty() {
+                continue;
+            }
+            if !is_safe_path(&name) {
+                problems.push(Problem::UnsafeEntry { path: name });
+                continue;
+            }
+            if let Err(p) = too_large(&name, size, limits) {
+                problems.push(p);
+            }
+            total = total.saturating_add(size);
+            if sizes.insert(name.clone(), size).is_some() {
+                problems.push(Problem::Unreadable {
+                    path: name,
+                    reason: "the archive holds two entries of this name".into(),
+                });
+            }
+        }
+        if total > limits.max_total_bytes {
+            problems.push(Problem::FileTooLarge {
+                path: "(whole archive)".into(),
+                size: total,
+                limit: limits.max_total_bytes,
+            });
+        }
+        if problems.is_empty() {
+            Ok(Self {
+                sizes,
+                held: Mutex::default(),
+            })
+        } else {
+            Err(problems)
+        }
+    }
+
+    /// Hands in a file's bytes (as the archive holds them once inflated).
+    pub fn provide(&self, path: &str, bytes: Vec<u8>) -> Result<(), Problem> {
+        let expected = self.sizes.get(path).copied();
+        match expected {
+            None => Err(Problem::Unreadable {
+                path: path.into(),
+                reason: "not an entry of the archive".into(),
+            }),
+            Some(n) if n != bytes.len() as u64 => Err(Problem::Unreadable {
+                path: path.into(),
+                reason: format!(
+                    "{} bytes read, the archive's directory says {n} (damaged archive?)",
+                    bytes.len()
+                ),
+            }),
+            Some(_) => {
+                if let Ok(mut h) = self.held.lock() {
+                    h.insert(path.into(), Arc::new(bytes));
+                }
+                Ok(())
+            }
+        }
+    }
+
+    /// True when `path` is held now.
+    pub fn holds(&self, path: &str) -> bool {
+        self.held.lock().is_ok_and(|h| h.contains_key(path))
+    }
+
+    /// Drops every held file that `keep` does not name.
+    pub fn retain(&self, keep: &std::collections::HashSet<&str>) {
+        if let Ok(mut h) = self.held.lock() {
+            h.retain(|k, _| keep.contains(k.as_str()));
+        }
+    }
+
+    /// Bytes held now.
+    pub fn held_bytes(&self) -> u64 {
+        self.held
+            .lock()
+            .map_or(0, |h| h.values().map(|b| b.len() as u64).sum())
+    }
+}
+
+impl Source for Arc<LazyStore> {
+    fn size(&self, path: &str) -> Option<u64> {
+        self.sizes.get(path).copied()
+    }
+
+    fn read(&self, path: &str, limits: &Limits) -> Result<Vec<u8>, Problem> {
+        let size = self.size(path).ok_or_else(|| Problem::Unreadable {
+            path: path.into(),
+            reason: "no such file".into(),
+        })?;
+        too_large(path, size, limits)?;
+        let held = self.held.lock().ok().and_then(|h| h.get(path).cloned());
+        match held {
+            Some(b) => Ok(b.as_ref().clone()),
+            None => Err(Problem::NotLoaded { path: path.into() }),
+        }
     }
 }

@@ -17,14 +17,56 @@ pub fn validate(
     limits: &Limits,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Vec<Problem> {
-    let mut v = Validator {
-        source,
-        limits,
-        problems: Vec::new(),
-        class_ids: [false; 256],
-    };
+    let mut v = Validator::new(source, limits, true);
     v.manifest_fields(m);
     v.files(m, progress);
+    v.problems
+}
+
+/// Every check of `validate` but those that read a file's content (images, labels):
+/// the manifest, every referenced file present, sizes. A bundle opened lazily is
+/// checked so at once, and each view's files by `validate_views` when they are read.
+pub fn validate_structure(m: &Manifest, source: &dyn Source, limits: &Limits) -> Vec<Problem> {
+    let mut v = Validator::new(source, limits, false);
+    v.manifest_fields(m);
+    v.files(m, &mut |_, _| {});
+    v.problems
+}
+
+/// The content checks of `validate` for the given views (frame, view) only, and the
+/// truth's images when `truth`: the image's size, the label's size, format and
+/// class ids; of those files, the ones `only` accepts.
+pub fn validate_views(
+    m: &Manifest,
+    source: &dyn Source,
+    limits: &Limits,
+    views: &[(usize, usize)],
+    truth: bool,
+    only: &dyn Fn(&str) -> bool,
+) -> Vec<Problem> {
+    let mut v = Validator::new(source, limits, true);
+    v.classes(m);
+    v.problems.clear();
+    if let (Some(gt), true) = (&m.ground_truth, truth) {
+        let present = [&gt.rgb, &gt.valid, &gt.class_ids]
+            .into_iter()
+            .map(|p| p.as_str())
+            .collect();
+        v.truth_images(gt, &present);
+    }
+    for &(f, k) in views {
+        let Some(view) = m.frames.get(f).and_then(|fr| fr.views.get(k)) else {
+            continue;
+        };
+        if let Some(cam) = m.camera(&view.camera) {
+            if only(&view.image) {
+                v.image_size(&view.image, &cam.name, cam.width, cam.height);
+            }
+            if only(&view.label) {
+                v.label(&view.label, &cam.name, cam.width, cam.height);
+            }
+        }
+    }
     v.problems
 }
 
@@ -33,9 +75,21 @@ struct Validator<'a> {
     limits: &'a Limits,
     problems: Vec<Problem>,
     class_ids: [bool; 256],
+    /// Whether images and labels are read (false: presence and sizes only).
+    content: bool,
 }
 
-impl Validator<'_> {
+impl<'a> Validator<'a> {
+    fn new(source: &'a dyn Source, limits: &'a Limits, content: bool) -> Self {
+        Self {
+            source,
+            limits,
+            problems: Vec::new(),
+            class_ids: [false; 256],
+            content,
+        }
+    }
+
     fn invalid(&mut self, field: impl Into<String>, what: impl Into<String>) {
         self.problems.push(Problem::Invalid {
             field: field.into(),
@@ -252,7 +306,7 @@ impl Validator<'_> {
         let mut done = 0;
         for f in &m.frames {
             for v in &f.views {
-                if let Some(cam) = m.camera(&v.camera) {
+                if let (Some(cam), true) = (m.camera(&v.camera), self.content) {
                     if present.contains(v.image.as_str()) {
                         self.image_size(&v.image, &cam.name, cam.width, cam.height);
                     }
@@ -281,13 +335,8 @@ impl Validator<'_> {
         }
         if let Some(gt) = &m.ground_truth {
             let (w, h) = (gt.width, gt.height);
-            for p in [&gt.rgb, &gt.valid] {
-                if present.contains(p.as_str()) {
-                    self.image_size(p, "ground_truth", w, h);
-                }
-            }
-            if present.contains(gt.class_ids.as_str()) {
-                self.label(&gt.class_ids, "ground_truth", w, h);
+            if self.content {
+                self.truth_images(gt, &present);
             }
             if let Some(len) = self.source.size(&gt.elevation) {
                 let expected = 4 * w as u64 * h as u64;
@@ -301,6 +350,18 @@ impl Validator<'_> {
             }
         }
         progress(total, total);
+    }
+
+    fn truth_images(&mut self, gt: &super::manifest::GroundTruth, present: &HashSet<&str>) {
+        let (w, h) = (gt.width, gt.height);
+        for p in [&gt.rgb, &gt.valid] {
+            if present.contains(p.as_str()) {
+                self.image_size(p, "ground_truth", w, h);
+            }
+        }
+        if present.contains(gt.class_ids.as_str()) {
+            self.label(&gt.class_ids, "ground_truth", w, h);
+        }
     }
 
     /// Reads only the header: dimensions are checked without decoding pixels.

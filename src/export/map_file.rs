@@ -526,14 +526,21 @@ pub const THUMBNAILS: usize = 120;
 /// Thumbnail width, pixels.
 pub const THUMB_WIDTH: u32 = 320;
 
+/// The frames that get a thumbnail: up to `THUMBNAILS`, evenly spaced.
+pub fn thumbnail_frames(m: &Manifest) -> Vec<usize> {
+    let n = m.frames.len();
+    let every = n.div_ceil(THUMBNAILS).max(1);
+    (0..n.div_ceil(every)).map(|i| i * every).collect()
+}
+
 /// JPEG thumbnails of the first view of up to `THUMBNAILS` frames, for a reviewer
 /// who clicks the trajectory without the bundle. Images that cannot be read are
 /// skipped (the bundle was validated; a thumbnail is not worth failing a map for).
 pub fn thumbnails(b: &Bundle) -> Vec<(usize, Vec<u8>)> {
     let frames = &b.manifest.frames;
-    let every = frames.len().div_ceil(THUMBNAILS).max(1);
-    crate::par::par_map(frames.len().div_ceil(every), |i| {
-        let f = i * every;
+    let chosen = thumbnail_frames(&b.manifest);
+    crate::par::par_map(chosen.len(), |i| {
+        let f = chosen[i];
         let view = frames[f].views.first()?;
         let img = image::load_from_memory(&b.read(&view.image).ok()?).ok()?;
         let h = (img.height() as u64 * THUMB_WIDTH as u64 / img.width().max(1) as u64).max(1);

@@ -24,7 +24,7 @@
 use crate::bundle::transform::apply;
 use crate::bundle::{Bundle, Problem};
 use crate::bundle::{Manifest, Mat4Rows};
-use crate::init::prepare::for_each_sweep;
+use crate::init::prepare::for_each_sweep_of;
 use glam::{DMat3, DVec3};
 
 /// Settings of the alignment (defaults for driving sweeps).
@@ -121,8 +121,18 @@ pub struct GroundReturn {
 
 /// The ground returns of every frame's sweep, through the bundle's poses.
 pub fn ground_returns(b: &Bundle, cfg: &AlignConfig) -> Result<Vec<GroundReturn>, Problem> {
+    ground_returns_of(b, cfg, None)
+}
+
+/// As `ground_returns`, over the frames marked in `frames` only (all when `None`):
+/// the page reads a long drive's sweeps a batch at a time and keeps only these.
+pub fn ground_returns_of(
+    b: &Bundle,
+    cfg: &AlignConfig,
+    frames: Option<&[bool]>,
+) -> Result<Vec<GroundReturn>, Problem> {
     let mut out = Vec::new();
-    for_each_sweep(b, |k, pose, pts| {
+    for_each_sweep_of(b, frames, |k, pose, pts| {
         out.extend(sweep_ground(&pts, pose, k as u32, cfg))
     })?;
     Ok(out)
@@ -168,12 +178,21 @@ pub fn sweep_ground(
 /// Aligns the bundle's poses in place when it has LiDAR, and says what it did.
 pub fn align_bundle(b: &mut Bundle, cfg: &AlignConfig) -> Result<Option<Alignment>, Problem> {
     let returns = ground_returns(b, cfg)?;
+    Ok(align_with_returns(b, &returns, cfg))
+}
+
+/// As `align_bundle`, from ground returns already gathered.
+pub fn align_with_returns(
+    b: &mut Bundle,
+    returns: &[GroundReturn],
+    cfg: &AlignConfig,
+) -> Option<Alignment> {
     if returns.is_empty() {
-        return Ok(None);
+        return None;
     }
-    let a = align(&returns, b.manifest.frames.len(), cfg);
+    let a = align(returns, b.manifest.frames.len(), cfg);
     apply_to_poses(&a, &mut b.manifest);
-    Ok(Some(a))
+    Some(a)
 }
 
 /// Estimates the corrections of `frames` frames from their ground returns.

@@ -22,8 +22,12 @@
 //! that see it); a view that sees two tiles trains both. Tiles are independent jobs:
 //! the GPU working set is bounded by the largest tile, and a tile can be run apart.
 
+mod files;
 pub mod tile;
 
+pub use files::{
+    finish_lazy, hold, start_files, start_lazy, step_lazy, tile_files, Fetch, Fetched,
+};
 pub use tile::Tile;
 
 use crate::bev::BevGeometry;
@@ -35,8 +39,8 @@ use crate::init::align::AlignSummary;
 use crate::init::PosePlanes;
 use crate::optim::train::StepLoss;
 use crate::reconstruct::{
-    align, frame_xy, report, HoldoutSums, Layers, Outcome, ReconstructConfig, ReconstructError,
-    Session, UNSEEN_OPACITY_LOGIT,
+    align_from, frame_xy, report, HoldoutSums, Layers, Outcome, ReconstructConfig,
+    ReconstructError, Session, UNSEEN_OPACITY_LOGIT,
 };
 use crate::render::from_bundle::view_camera;
 use crate::render::Params;
@@ -420,8 +424,21 @@ impl TiledRun {
         tiling: Option<TileConfig>,
         ctx: GpuContext,
     ) -> Result<Self, ReconstructError> {
+        Self::new_with(b, cfg, tiling, ctx, None).await
+    }
+
+    /// As `new`, with the LiDAR's ground returns already gathered (`returns`), so
+    /// that the alignment reads no sweep (a lazily read bundle gathers them a batch
+    /// of sweeps at a time, `align::ground_returns_of`).
+    pub async fn new_with(
+        b: &mut Bundle,
+        cfg: ReconstructConfig,
+        tiling: Option<TileConfig>,
+        ctx: GpuContext,
+        returns: Option<&[crate::init::align::GroundReturn]>,
+    ) -> Result<Self, ReconstructError> {
         let t = Instant::now();
-        let alignment = align(b, &cfg)?;
+        let alignment = align_from(b, &cfg, returns)?;
         let align_ms = t.elapsed().as_secs_f64() * 1e3;
         let b: &Bundle = b;
         let truth = BevRaster::from_bundle(b)?;
@@ -551,6 +568,8 @@ impl TiledRun {
                     return Ok(Some(l));
                 }
                 Ok(None) => continue,
+                // Nothing was changed: the step runs again once the file is there.
+                Err(e) if e.not_loaded().is_some() => return Err(e),
                 Err(e) => return Err(self.fail(e)),
             }
         }
@@ -606,6 +625,11 @@ impl TiledRun {
                         stopped: Some("skipped: no surfels, or no training view sees them".into()),
                         ..Default::default()
                     });
+                }
+                Err(e) if e.not_loaded().is_some() => {
+                    // Not a failure: this tile starts again once its files are there.
+                    self.started -= 1;
+                    return Err(e);
                 }
                 Err(e) => return Err(self.fail(e)),
             }

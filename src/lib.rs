@@ -28,5 +28,3 @@ pub mod cli;
 
 #[cfg(target_arch = "wasm32")]
 pub mod web;
-#[cfg(target_arch = "wasm32")]
-pub mod web_map;

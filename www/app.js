@@ -1,10 +1,11 @@
 // The page shell: loads the engine, checks WebGPU, takes a bundle (drop, picker,
 // ?url=, example) and shows its summary or its problems in words. Nothing here
 // sends user data anywhere: bundles are read in memory by the wasm engine.
-import init, { inspect_bundle, example_bundle, gpu_info } from './pkg/rogs.js';
+import init, { inspect_bundle, inspect_lazy_bundle, example_bundle, gpu_info } from './pkg/rogs.js';
 import { offerOptimisation, wireMap } from './map.js';
 import { openReview, wireReview } from './review.js';
-import { blobSource, isMapFile } from './rogsmap.js';
+import { blobSource, urlSource, isMapFile } from './rogsmap.js';
+import { LAZY_BYTES, lazyForced, openLazyBundle } from './bundle.js';
 
 const $ = (id) => document.getElementById(id);
 let engineReady = null;
@@ -134,29 +135,55 @@ async function openBytes(bytes, source, add = false) {
   // Let the status paint before the (synchronous) validation runs.
   await new Promise((r) => setTimeout(r, 0));
   try {
-    const r = inspect_bundle(bytes);
-    if (r.status === 'valid') {
-      if (add && drives.length) {
-        drives.push({ name: source, bytes, summary: r.summary });
-      } else {
-        drives = [{ name: source, bytes, summary: r.summary }];
-        showSummary(r.summary, source);
-        // The corridor the bundle asks for (its importer's), unless changed by hand.
-        $('set-half-width').value = String(r.summary.corridor_half_width_m || 4);
-      }
-      showDrives();
-      offerOptimisation(drives, r.summary.classes);
-      document.body.dataset.drives = String(drives.length);
-      setStatus(drives.length > 1
-        ? `${drives.length} drives ready (${drives.map((d) => d.name).join(', ')}): press Optimise to build one map of them.`
-        : `${source} is a valid bundle: press Optimise to build its map.`, 'ok');
-    } else {
-      showProblems(r.problems);
-      $('optimise').hidden = true;
-      setStatus(`${source} is not a valid bundle: ${r.problems.length} problem(s).`, 'error');
-    }
+    accept(inspect_bundle(bytes), { name: source, bytes }, add);
   } catch (e) {
     setStatus(`Could not read ${source}: ${e}`, 'error');
+  }
+}
+
+// A bundle read lazily (bundle.js): its directory and manifest now, the files of a
+// tile when the run trains it.
+async function openLazy(src, source, add = false) {
+  await engineReady;
+  setStatus(`Reading the directory of ${source}…`);
+  try {
+    const lazy = await openLazyBundle(src);
+    accept(inspect_lazy_bundle(lazy.manifest, lazy.names, lazy.sizes), { name: source, lazy }, add);
+  } catch (e) {
+    if (e.problems) {
+      showProblems(e.problems);
+      $('optimise').hidden = true;
+      setStatus(`${source} is not a valid bundle: ${e.problems.length} problem(s).`, 'error');
+    } else {
+      setStatus(`Could not read ${source}: ${e.message || e}`, 'error');
+    }
+  }
+}
+
+function accept(r, drive, add) {
+  const source = drive.name;
+  if (r.status === 'valid') {
+    drive.summary = r.summary;
+    if (add && drives.length) {
+      drives.push(drive);
+    } else {
+      drives = [drive];
+      showSummary(r.summary, source);
+      // The corridor the bundle asks for (its importer's), unless changed by hand.
+      $('set-half-width').value = String(r.summary.corridor_half_width_m || 4);
+    }
+    showDrives();
+    offerOptimisation(drives, r.summary.classes);
+    document.body.dataset.drives = String(drives.length);
+    document.body.dataset.lazy = String(drives.some((d) => d.lazy));
+    const how = drive.lazy ? ` It is read lazily: ${(drive.lazy.size / 1048576).toFixed(1)} MiB on disk, a tile's files at a time in memory.` : '';
+    setStatus(drives.length > 1
+      ? `${drives.length} drives ready (${drives.map((d) => d.name).join(', ')}): press Optimise to build one map of them.${how}`
+      : `${source} is a valid bundle: press Optimise to build its map.${how}`, 'ok');
+  } else {
+    showProblems(r.problems);
+    $('optimise').hidden = true;
+    setStatus(`${source} is not a valid bundle: ${r.problems.length} problem(s).`, 'error');
   }
 }
 
@@ -169,6 +196,11 @@ async function openFile(file, add = false) {
   }
   $('review').hidden = true;
   $('map-problems').hidden = true;
+  // A long drive is never read whole: its zip's directory, then a tile at a time.
+  if (file.size > LAZY_BYTES || lazyForced()) {
+    await openLazy(blobSource(file, file.name), file.name, add);
+    return;
+  }
   try {
     const bytes = new Uint8Array(await file.arrayBuffer());
     await openBytes(bytes, file.name, add);
@@ -209,6 +241,12 @@ async function readWithProgress(res, url) {
 async function openUrl(url) {
   setStatus(`Downloading ${url}…`);
   try {
+    // A large bundle on a server that answers range requests is read lazily.
+    const src = await urlSource(url).catch(() => null);
+    if (src?.lazy && (src.size > LAZY_BYTES || lazyForced())) {
+      await openLazy(src, url);
+      return;
+    }
     const res = await fetch(url);
     if (!res.ok) {
       const hint = url === 'demo/demo.zip' ? ' (npm start generates the demo scene)' : '';

@@ -1,7 +1,9 @@
 // The optimisation panel and the map viewer: runs the engine step by step (yielding
 // to the browser between steps so the page stays responsive), then shows the BEV
 // layers on a canvas with pan, zoom, visibility and opacity, and offers the exports.
-import { start_reconstruction, start_reconstruction_drives } from './pkg/rogs.js';
+import { start_reconstruction, start_reconstruction_drives, start_reconstruction_lazy } from './pkg/rogs.js';
+import { openLazyBundle, readerOf } from './bundle.js';
+import { blobSource } from './zip.js';
 import { createGpuView } from './gpu-view.js';
 import { openReview, setFrameViewer } from './review.js';
 
@@ -65,9 +67,16 @@ async function optimise(setStatus) {
   setStatus('Preparing surfels on the GPU…');
   let rec;
   try {
-    rec = drives.length > 1
-      ? await start_reconstruction_drives(drives.map((d) => d.bytes), drives.map((d) => d.name), settings())
-      : await start_reconstruction(drives[0].bytes, settings());
+    if (drives.some((d) => d.lazy)) {
+      // One lazily read drive makes every drive of the map read so.
+      const lazy = await Promise.all(drives.map((d) => d.lazy || openLazyBundle(blobSource(new Blob([d.bytes]), d.name))));
+      rec = await start_reconstruction_lazy(lazy.map((l) => l.manifest), lazy.map((l) => l.names),
+        lazy.map((l) => l.sizes), drives.map((d) => d.name), readerOf(lazy), settings());
+    } else {
+      rec = drives.length > 1
+        ? await start_reconstruction_drives(drives.map((d) => d.bytes), drives.map((d) => d.name), settings())
+        : await start_reconstruction(drives[0].bytes, settings());
+    }
   } catch (e) {
     setStatus(`Could not start: ${e}`, 'error');
     $('run').disabled = false;
@@ -99,7 +108,10 @@ async function optimise(setStatus) {
     const tiles = rec.tiles();
     const tile = tiles > 1 ? `tile ${rec.tile() + 1} / ${tiles} · ` : '';
     document.body.dataset.tiles = String(tiles);
-    $('progress-text').textContent = `${tile}step ${done} / ${total} · loss ${loss.toFixed(4)} · ${per.toFixed(2)} s per step · ETA ${fmtTime(per * (total - done))}`;
+    const held = rec.held_bytes();
+    if (held > Number(document.body.dataset.heldPeak || 0)) document.body.dataset.heldPeak = String(held);
+    const holding = held ? ` · holding ${(held / 1048576).toFixed(1)} MiB of the bundle` : '';
+    $('progress-text').textContent = `${tile}step ${done} / ${total} · loss ${loss.toFixed(4)} · ${per.toFixed(2)} s per step · ETA ${fmtTime(per * (total - done))}${holding}`;
     document.body.dataset.steps = String(done);
     if (done % 5 === 0) drawLoss(losses);
     // A live preview of the map, throttled: it renders the whole map.

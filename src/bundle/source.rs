@@ -273,6 +273,11 @@ impl LazyStore {
         }
     }
 
+    /// Uncompressed bytes of every entry.
+    pub fn total_bytes(&self) -> u64 {
+        self.sizes.values().sum()
+    }
+
     /// Bytes held now.
     pub fn held_bytes(&self) -> u64 {
         self.held

@@ -192,6 +192,31 @@ test('the map is trained tile by tile in the page when a tile size is set', asyn
   await page.close();
 });
 
+test('a bundle read lazily (?lazy=1) trains tile by tile holding one tile\'s files', async () => {
+  const { page, errors } = await openPage('?lazy=1');
+  await drop(page, 'demo.zip');
+  await page.waitForSelector('body[data-lazy="true"]');
+  assert.match(await page.textContent('#status'), /read lazily/);
+  await page.selectOption('#set-resolution', '0.2');
+  await page.fill('#set-tile', '4');
+  await page.click('#run');
+  await page.waitForSelector('#viewer:not([hidden]) #exports a', { timeout: 170_000 });
+  assert.match(await page.textContent('#status'), /Map ready/);
+  const size = (await import('node:fs')).statSync(path.join(fixtures, 'demo.zip')).size;
+  const peak = Number(await page.getAttribute('body', 'data-held-peak'));
+  assert.ok(peak > 0 && peak < size, `held at most ${peak} bytes of a ${size}-byte bundle`);
+  const r = await page.evaluate(async () => {
+    const a = [...document.querySelectorAll('#exports a')].find((x) => x.download === 'report.json');
+    return (await fetch(a.href)).json();
+  });
+  assert.ok(r.tile_count > 1 && r.metrics.psnr_db > 10, JSON.stringify(r.metrics));
+  // A damaged bundle read lazily is refused by name.
+  await drop(page, 'invalid.zip');
+  await page.waitForFunction(() => /not a valid bundle/.test(document.getElementById('status').textContent));
+  assert.deepEqual(errors, []);
+  await page.close();
+});
+
 test('the rasteriser benchmark runs in the page (scripts/bench-raster-page.mjs)', async () => {
   const { page, errors } = await openPage();
   const json = await page.evaluate(async () => {

@@ -7,9 +7,22 @@ use crate::gpu::GpuContext;
 use serde::Serialize;
 use wasm_bindgen::prelude::*;
 
+mod lazy;
+pub mod map;
+
 #[wasm_bindgen(start)]
 pub fn start() {
     console_error_panic_hook::set_once();
+}
+
+/// Bytes of the module's linear memory (the wasm heap): it only grows.
+#[wasm_bindgen]
+pub fn wasm_memory_bytes() -> f64 {
+    wasm_bindgen::memory()
+        .dyn_into::<js_sys::WebAssembly::Memory>()
+        .map_or(0.0, |m| {
+            js_sys::ArrayBuffer::from(m.buffer()).byte_length() as f64
+        })
 }
 
 #[wasm_bindgen]
@@ -38,7 +51,23 @@ fn to_js<T: Serialize>(v: &T) -> Result<JsValue, JsValue> {
 /// `{status: "invalid", problems: [{location, message}]}`.
 #[wasm_bindgen]
 pub fn inspect_bundle(bytes: Vec<u8>) -> Result<JsValue, JsValue> {
-    let result = match Bundle::from_zip_bytes(bytes, Limits::default()) {
+    inspected(Bundle::from_zip_bytes(bytes, Limits::default()))
+}
+
+/// As `inspect_bundle`, for a bundle read lazily (`www/bundle.js`): its manifest and
+/// its zip's table of entries (names, uncompressed sizes). The checks are the
+/// structural ones; each image and label is checked when a tile reads it.
+#[wasm_bindgen]
+pub fn inspect_lazy_bundle(
+    manifest: Vec<u8>,
+    names: Vec<String>,
+    sizes: Vec<f64>,
+) -> Result<JsValue, JsValue> {
+    inspected(lazy::open(manifest, names, sizes).map(|(b, _)| b))
+}
+
+fn inspected(r: Result<Bundle, crate::bundle::BundleErrors>) -> Result<JsValue, JsValue> {
+    let result = match r {
         Ok(b) => InspectJs::Valid {
             summary: b.summary(),
         },

@@ -3,7 +3,7 @@
 //! export files. Errors reach JavaScript as sentences; nothing panics.
 
 use crate::bev::BevGeometry;
-use crate::bundle::{Bundle, Limits};
+use crate::bundle::{Bundle, LazyFiles, Limits};
 use crate::gpu::GpuContext;
 use crate::reconstruct::{Outcome, ReconstructConfig, Session};
 use crate::tiles::{TileConfig, TiledRun, DEFAULT_OVERLAP_M};
@@ -32,6 +32,9 @@ struct Settings {
     ply_up: Option<String>,
 }
 
+/// A lazily read drive above this size is tiled even when its corridor is small.
+const LAZY_UNTILED_BYTES: u64 = 512 << 20;
+
 #[wasm_bindgen]
 pub struct Reconstruction {
     bundle: Bundle,
@@ -41,6 +44,8 @@ pub struct Reconstruction {
     outcome: Option<Outcome>,
     files: Vec<(String, Vec<u8>)>,
     ply_up: crate::export::ply::Up,
+    /// For a bundle read lazily: its stores and the page's reader.
+    lazy: Option<(LazyFiles, js_sys::Function)>,
 }
 
 /// Opens a bundle, prepares the surfels and uploads them to the GPU.
@@ -50,7 +55,7 @@ pub async fn start_reconstruction(
     settings: JsValue,
 ) -> Result<Reconstruction, JsValue> {
     let bundle = Bundle::from_zip_bytes(bytes, Limits::default()).map_err(err)?;
-    start(bundle, settings).await
+    start(bundle, settings, None).await
 }
 
 /// Several drives of the same streets (zip bytes each, with their names for
@@ -74,10 +79,55 @@ pub async fn start_reconstruction_drives(
         bundles.push(b);
     }
     let bundle = Bundle::merge(bundles, &names).map_err(err)?;
-    start(bundle, settings).await
+    start(bundle, settings, None).await
 }
 
-async fn start(mut bundle: Bundle, settings: JsValue) -> Result<Reconstruction, JsValue> {
+/// Drives read lazily (`www/bundle.js`): for each, its manifest.json bytes and its
+/// zip's entry names and uncompressed sizes; `reader([[drive, path], …])` resolves
+/// to the files' bytes. Only the files of the tile being trained are held.
+#[wasm_bindgen]
+pub async fn start_reconstruction_lazy(
+    manifests: js_sys::Array,
+    entry_names: js_sys::Array,
+    entry_sizes: js_sys::Array,
+    names: Vec<String>,
+    reader: js_sys::Function,
+    settings: JsValue,
+) -> Result<Reconstruction, JsValue> {
+    let mut bundles = Vec::new();
+    let mut stores = Vec::new();
+    for k in 0..manifests.length() {
+        let name = names
+            .get(k as usize)
+            .cloned()
+            .unwrap_or_else(|| format!("drive {}", k + 1));
+        let manifest = js_sys::Uint8Array::new(&manifests.get(k)).to_vec();
+        let list: Vec<String> = js_sys::Array::from(&entry_names.get(k))
+            .iter()
+            .map(|v| v.as_string().unwrap_or_default())
+            .collect();
+        let sizes: Vec<f64> = js_sys::Array::from(&entry_sizes.get(k))
+            .iter()
+            .map(|v| v.as_f64().unwrap_or(f64::NAN))
+            .collect();
+        let (b, store) =
+            super::lazy::open(manifest, list, sizes).map_err(|e| err(format!("{name}: {e}")))?;
+        bundles.push(b);
+        stores.push(store);
+    }
+    let bundle = if bundles.len() == 1 {
+        bundles.pop().ok_or_else(|| err("no drive"))?
+    } else {
+        Bundle::merge(bundles, &names).map_err(err)?
+    };
+    start(bundle, settings, Some((LazyFiles { stores }, reader))).await
+}
+
+async fn start(
+    mut bundle: Bundle,
+    settings: JsValue,
+    lazy: Option<(LazyFiles, js_sys::Function)>,
+) -> Result<Reconstruction, JsValue> {
     let s: Settings = if settings.is_undefined() || settings.is_null() {
         Settings::default()
     } else {
@@ -117,11 +167,24 @@ async fn start(mut bundle: Bundle, settings: JsValue) -> Result<Reconstruction, 
         }
         None => None,
     };
-    let tiling = crate::tiles::choose(&bundle.manifest, &c, asked);
+    let mut tiling = crate::tiles::choose(&bundle.manifest, &c, asked);
+    if let (Some((files, _)), None) = (&lazy, tiling) {
+        // Untiled, a run reads every file at once: a large drive read lazily is
+        // tiled whatever its surfel count, so that memory holds one tile's files.
+        let bytes: u64 = files.stores.iter().map(|s| s.total_bytes()).sum();
+        if bytes > LAZY_UNTILED_BYTES {
+            tiling = Some(TileConfig::default());
+        }
+    }
     let ctx = GpuContext::new().await.map_err(err)?;
-    let run = TiledRun::new(&mut bundle, c, tiling, ctx)
-        .await
-        .map_err(err)?;
+    let run = match &lazy {
+        Some((files, reader)) => {
+            let mut f = super::lazy::fetcher(reader.clone());
+            crate::tiles::start_lazy(&mut bundle, files, c, tiling, ctx, &mut f).await
+        }
+        None => TiledRun::new(&mut bundle, c, tiling, ctx).await,
+    }
+    .map_err(err)?;
     let geometry = run.geometry;
     Ok(Reconstruction {
         bundle,
@@ -130,6 +193,7 @@ async fn start(mut bundle: Bundle, settings: JsValue) -> Result<Reconstruction, 
         outcome: None,
         files: Vec::new(),
         ply_up,
+        lazy,
     })
 }
 
@@ -160,14 +224,27 @@ impl Reconstruction {
 
     /// One step; resolves to the total loss, or `undefined` when all steps are done.
     pub async fn step(&mut self) -> Result<Option<f64>, JsValue> {
-        let l = self.run.step(&self.bundle).await.map_err(err)?;
+        let l = match &self.lazy {
+            Some((files, reader)) => {
+                let mut f = super::lazy::fetcher(reader.clone());
+                crate::tiles::step_lazy(&mut self.run, &self.bundle, files, &mut f).await
+            }
+            None => self.run.step(&self.bundle).await,
+        }
+        .map_err(err)?;
         Ok(l.map(|l| l.total()))
     }
 
     /// Renders the layers, scores them and prepares the export files; resolves to the
     /// report (as JSON text).
     pub async fn finish(&mut self) -> Result<String, JsValue> {
-        let o = self.run.finish(&self.bundle, &mut |_, _| {}).await;
+        let o = match &self.lazy {
+            Some((files, reader)) => {
+                let mut f = super::lazy::fetcher(reader.clone());
+                crate::tiles::finish_lazy(&mut self.run, &self.bundle, files, &mut f).await
+            }
+            None => self.run.finish(&self.bundle, &mut |_, _| {}).await,
+        };
         // Kept for export even if the BEV failed.
         let (p, origin) = self.run.model();
         self.files = crate::export::model_files(p, origin, &self.bundle.manifest, self.ply_up);
@@ -209,6 +286,12 @@ impl Reconstruction {
         Session::trajectory(&self.bundle, &self.geometry)
     }
 
+    /// Bytes of bundle files held in memory now (a lazily read bundle: the current
+    /// tile's; read whole: 0, the zip's own bytes are not counted).
+    pub fn held_bytes(&self) -> f64 {
+        self.lazy.as_ref().map_or(0, |l| l.0.held_bytes()) as f64
+    }
+
     /// Number of frames, for the camera-view panel.
     pub fn frames(&self) -> usize {
         self.bundle.manifest.frames.len()
@@ -222,6 +305,19 @@ impl Reconstruction {
             .session
             .as_ref()
             .ok_or_else(|| err("no trained tile to render from"))?;
+        if let (Some((files, reader)), Some(fr)) =
+            (&self.lazy, self.bundle.manifest.frames.get(frame))
+        {
+            // The view's input image, besides what the run holds.
+            let mut wanted = self.run.wanted(&self.bundle);
+            if let Some(v) = fr.views.get(view) {
+                wanted.push(v.image.clone());
+            }
+            let mut f = super::lazy::fetcher(reader.clone());
+            crate::tiles::hold(&self.bundle, files, &wanted, &mut f)
+                .await
+                .map_err(err)?;
+        }
         let r = s
             .camera_view(&self.bundle, frame, view)
             .await

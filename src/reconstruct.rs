@@ -43,6 +43,18 @@ pub enum ReconstructError {
         "the bundle has no training views (every frame is held out or no view names a camera)"
     )]
     NoViews,
+    #[error(
+        "the map would be {width}×{height} px at {resolution} m, {mib} MiB of layers, over the budget of {budget_mib} MiB; \
+         use a coarser resolution (--resolution; twice as coarse needs a quarter), or map the drive in parts of a few km",
+        mib = bytes >> 20, budget_mib = budget >> 20
+    )]
+    MapTooLarge {
+        width: u32,
+        height: u32,
+        bytes: u64,
+        budget: u64,
+        resolution: f64,
+    },
     /// A tile with no surfels or no view that sees them (skipped by the tiled run).
     #[error("the tile has no surfels or no training view sees them")]
     EmptyTile,

@@ -360,7 +360,7 @@ fn path_traversal_is_refused() {
     files.push(("../evil.sh".into(), b"rm -rf /".to_vec()));
     let p = problems(&m, &files);
     assert!(
-        matches!(&p[..], [Problem::UnsafeEntry { path }] if path == "../evil.sh"),
+        matches!(&p[..], [Problem::UnsafeEntry { path, .. }] if path == "../evil.sh"),
         "{p:?}"
     );
 }
@@ -402,4 +402,156 @@ fn oversized_image_dimensions_are_refused() {
             .any(|p| matches!(p, Problem::ImageTooLarge { width: 64, .. })),
         "{p:?}"
     );
+}
+
+/// The field a problem names, and its message.
+fn named(p: &[Problem]) -> Vec<(String, String)> {
+    p.iter()
+        .map(|p| (p.location().to_string(), p.to_string()))
+        .collect()
+}
+
+#[test]
+fn implausible_numbers_are_refused_by_field_with_the_expected_range() {
+    // Each case breaks one thing; each must be refused naming its field and rule.
+    type Case = (&'static str, fn(&mut Manifest), &'static str, &'static str);
+    let cases: [Case; 6] = [
+        (
+            "a pose 1e308 m away",
+            |m| m.frames[1].vehicle_to_world[0][3] = 1e308,
+            "frames[1].vehicle_to_world translation",
+            "local world frame",
+        ),
+        (
+            "a focal length in millimetres",
+            |m| m.cameras[0].fx = 1.0,
+            "cameras[0].fx",
+            "not millimetres",
+        ),
+        (
+            "a focal length of a 0.01° view",
+            |m| m.cameras[0].fy = 1e9,
+            "cameras[0].fy",
+            "field of view",
+        ),
+        (
+            "a principal point far outside the image",
+            |m| m.cameras[0].cx = 1e6,
+            "cameras[0].cx",
+            "principal point",
+        ),
+        (
+            "a camera mounted a kilometre from the vehicle",
+            |m| m.cameras[0].camera_to_vehicle[2][3] = 1000.0,
+            "cameras[0].camera_to_vehicle translation",
+            "vehicle frame",
+        ),
+        (
+            "a LiDAR mounted in another city",
+            |m| {
+                if let Some(l) = m.lidar.as_mut() {
+                    l.lidar_to_vehicle[0][3] = 5e4;
+                }
+            },
+            "lidar.lidar_to_vehicle translation",
+            "check the units",
+        ),
+    ];
+    for (what, break_it, field, rule) in cases {
+        let (mut m, files) = example::tiny();
+        break_it(&mut m);
+        let p = named(&problems(&m, &files));
+        assert!(
+            p.iter().any(|(f, msg)| f == field && msg.contains(rule)),
+            "{what}: {p:?}"
+        );
+    }
+}
+
+#[test]
+fn entry_names_are_refused_with_the_rule_they_break_and_duplicates_by_name() {
+    for (name, rule) in [
+        ("a:b.png", "':'"),
+        ("./a.png", "'.' component"),
+        ("a//b.png", "empty component"),
+        ("../a.png", "'..'"),
+    ] {
+        let (m, mut files) = example::tiny();
+        files.push((name.into(), b"x".to_vec()));
+        let Ok(z) = rogs::bundle::write_zip(&m, &files) else {
+            continue; // the writer itself refused the name
+        };
+        let p = match Bundle::from_zip_bytes(z, Limits::default()) {
+            Ok(_) => panic!("{name} accepted"),
+            Err(e) => named(&e.0),
+        };
+        assert!(p.iter().any(|(_, msg)| msg.contains(rule)), "{name}: {p:?}");
+        if name.contains("..") {
+            assert!(p.iter().all(|(_, msg)| !msg.contains("':'")), "{p:?}");
+        }
+    }
+    // Two entries of one name: neither silently wins.
+    let (m, files) = example::tiny();
+    let mut z = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    let opts = zip::write::SimpleFileOptions::default();
+    let manifest = serde_json::to_vec(&m).expect("json");
+    z.start_file("manifest.json", opts).expect("entry");
+    std::io::Write::write_all(&mut z, &manifest).expect("write");
+    for (path, bytes) in &files {
+        z.start_file(path.as_str(), opts).expect("entry");
+        std::io::Write::write_all(&mut z, bytes).expect("write");
+    }
+    // The writer refuses a second entry of a name: write it under a twin name of
+    // the same length, then rename it in the bytes (local header and directory).
+    let dup = &files[0].0;
+    let mut twin = dup.clone();
+    twin.pop();
+    twin.push('~');
+    z.start_file(twin.as_str(), opts).expect("entry");
+    std::io::Write::write_all(&mut z, &files[0].1).expect("write");
+    let mut bytes = z.finish().expect("zip").into_inner();
+    let (from, to) = (twin.as_bytes(), dup.as_bytes());
+    let mut renamed = 0;
+    let mut i = 0;
+    while i + from.len() <= bytes.len() {
+        if &bytes[i..i + from.len()] == from {
+            bytes[i..i + from.len()].copy_from_slice(to);
+            renamed += 1;
+        }
+        i += 1;
+    }
+    assert_eq!(renamed, 2, "the twin's local header and directory entry");
+    let p = match Bundle::from_zip_bytes(bytes, Limits::default()) {
+        Ok(_) => panic!("a duplicate entry was accepted"),
+        Err(e) => named(&e.0),
+    };
+    assert!(
+        p.iter()
+            .any(|(f, msg)| f == dup && msg.contains("two entries")),
+        "{p:?}"
+    );
+}
+
+#[test]
+fn a_symbolic_link_out_of_a_bundle_folder_is_not_followed() {
+    let (m, files) = example::tiny();
+    let dir = std::env::temp_dir().join(format!("rogs-symlink-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    rogs::bundle::write_dir(&dir, &m, &files).expect("folder");
+    let outside = dir.with_extension("outside.png");
+    let target = &m.frames[0].views[0].image;
+    std::fs::copy(dir.join(target), &outside).expect("copy");
+    std::fs::remove_file(dir.join(target)).expect("remove");
+    std::os::unix::fs::symlink(&outside, dir.join(target)).expect("symlink");
+    let p = match Bundle::open(&dir, Limits::default(), &mut |_, _| {}) {
+        Ok(_) => panic!("a link out of the bundle was followed"),
+        Err(e) => e.0,
+    };
+    assert!(
+        p.iter()
+            .any(|p| matches!(p, Problem::MissingFile { path, .. } if path == target)),
+        "{p:?}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_file(&outside);
 }

@@ -344,3 +344,24 @@ fn the_truth_grid_grows_to_cover_every_drive() {
         "grown by less than a pixel too many"
     );
 }
+
+#[test]
+fn a_map_too_large_for_memory_is_refused_with_advice_before_it_is_allocated() {
+    // A drive 100 km long at 5 cm: 2 million pixels by the corridor's width, tens
+    // of GB of layers. Refused by name before anything map-sized is allocated.
+    let (mut m, files) = rogs::bundle::example::tiny();
+    let last = m.frames.len() - 1;
+    m.frames[last].vehicle_to_world[0][3] = 1e5;
+    m.ground_truth = None;
+    let mut b = bundle(&m, &files);
+    let mut c = ReconstructConfig::default();
+    c.prepare.grid.resolution = 0.05;
+    // As the CLI and the page choose: tiled, since the corridor is large.
+    let tiling = rogs::tiles::choose(&b.manifest, &c, None);
+    assert!(tiling.is_some());
+    let e = match pollster::block_on(TiledRun::new(&mut b, c, tiling, ctx())) {
+        Err(e) => e.to_string(),
+        Ok(_) => panic!("a 100 km map at 5 cm must be refused"),
+    };
+    assert!(e.contains("MiB of layers") && e.contains("coarser resolution"), "{e}");
+}

@@ -17,7 +17,7 @@ pub enum Problem {
     Format { found: String },
     #[error("version: found {found}, this build reads version {supported}")]
     Version { found: u32, supported: u32 },
-    #[error("{field}: path {path:?} is not allowed: paths must be relative, use '/' and contain no '..'")]
+    #[error("{field}: path {path:?} is not allowed: {}; paths must be relative '/'-separated paths inside the bundle", super::source::unsafe_rule(path))]
     UnsafePath { field: String, path: String },
     #[error("{field}: file {path:?} is not in the bundle")]
     MissingFile { field: String, path: String },
@@ -82,8 +82,8 @@ pub enum Problem {
         len: u64,
         expected: u64,
     },
-    #[error("zip entry {path:?} is not allowed: entry names must be relative and contain no '..'")]
-    UnsafeEntry { path: String },
+    #[error("zip entry {path:?} is not allowed: {rule}; entry names must be relative '/'-separated paths inside the bundle")]
+    UnsafeEntry { path: String, rule: &'static str },
 }
 
 impl Problem {
@@ -113,7 +113,7 @@ impl Problem {
             | LabelOutOfRange { path, .. }
             | LidarStride { path, .. }
             | ElevationSize { path, .. }
-            | UnsafeEntry { path } => path,
+            | UnsafeEntry { path, .. } => path,
         }
     }
 }

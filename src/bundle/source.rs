@@ -43,6 +43,72 @@ pub fn is_safe_path(path: &str) -> bool {
             .all(|c| !c.is_empty() && c != ".." && c != ".")
 }
 
+/// The entry names of a zip's central directory, in order, twins included (`None`
+/// when the directory cannot be found; the zip reader then says why). Zip64
+/// directories are not walked.
+fn central_names(r: &mut dyn ReadSeek) -> Option<Vec<String>> {
+    use std::io::SeekFrom;
+    let len = r.seek(SeekFrom::End(0)).ok()?;
+    let tail_len = len.min(65_557);
+    r.seek(SeekFrom::Start(len - tail_len)).ok()?;
+    let mut tail = vec![0u8; tail_len as usize];
+    r.read_exact(&mut tail).ok()?;
+    let e = (0..tail.len().saturating_sub(21))
+        .rev()
+        .find(|&i| tail[i..i + 4] == [0x50, 0x4b, 0x05, 0x06])?;
+    let u16_at = |b: &[u8], o: usize| u16::from_le_bytes([b[o], b[o + 1]]) as usize;
+    let u32_at = |b: &[u8], o: usize| u32::from_le_bytes([b[o], b[o + 1], b[o + 2], b[o + 3]]);
+    let (count, size, offset) = (
+        u16_at(&tail, e + 10),
+        u32_at(&tail, e + 12),
+        u32_at(&tail, e + 16),
+    );
+    if count == 0xffff || offset == u32::MAX || u64::from(offset) + u64::from(size) > len {
+        return None;
+    }
+    r.seek(SeekFrom::Start(offset.into())).ok()?;
+    let mut cd = vec![0u8; size as usize];
+    r.read_exact(&mut cd).ok()?;
+    let mut names = Vec::with_capacity(count);
+    let mut p = 0;
+    for _ in 0..count {
+        if p + 46 > cd.len() || cd[p..p + 4] != [0x50, 0x4b, 0x01, 0x02] {
+            return None;
+        }
+        let (n, x, c) = (
+            u16_at(&cd, p + 28),
+            u16_at(&cd, p + 30),
+            u16_at(&cd, p + 32),
+        );
+        let name = cd.get(p + 46..p + 46 + n)?;
+        names.push(String::from_utf8_lossy(name).into_owned());
+        p += 46 + n + x + c;
+    }
+    r.seek(SeekFrom::Start(0)).ok()?;
+    Some(names)
+}
+
+/// The rule an unsafe path breaks, in words.
+pub fn unsafe_rule(path: &str) -> &'static str {
+    if path.is_empty() {
+        "it is empty"
+    } else if path.starts_with('/') {
+        "it is absolute (starts with '/')"
+    } else if path.contains('\\') {
+        "it contains '\\' (use '/')"
+    } else if path.contains(':') {
+        "it contains ':' (a drive letter or stream name)"
+    } else if path.contains('\0') {
+        "it contains a NUL byte"
+    } else if path.split('/').any(|c| c == "..") {
+        "it contains a '..' component"
+    } else if path.split('/').any(|c| c == ".") {
+        "it contains a '.' component"
+    } else {
+        "it contains an empty component ('//')"
+    }
+}
+
 /// A readable set of named files.
 pub trait Source: Send + Sync {
     /// Uncompressed size, or `None` when the file is absent.
@@ -79,10 +145,31 @@ impl ZipSource {
 
     /// Opens the archive and checks every entry name and the declared sizes. Only
     /// the central directory is read; entries are inflated when they are read.
-    pub fn from_reader(reader: Box<dyn ReadSeek>, limits: &Limits) -> Result<Self, Vec<Problem>> {
+    pub fn from_reader(
+        mut reader: Box<dyn ReadSeek>,
+        limits: &Limits,
+    ) -> Result<Self, Vec<Problem>> {
+        // The zip reader keeps one entry per name: find a name's twins first.
+        let twins = central_names(reader.as_mut())
+            .map(|names| {
+                let mut seen = std::collections::HashSet::new();
+                let mut twins: Vec<String> = names
+                    .into_iter()
+                    .filter(|n| !seen.insert(n.clone()))
+                    .collect();
+                twins.dedup();
+                twins
+            })
+            .unwrap_or_default();
         let mut archive =
             zip::ZipArchive::new(reader).map_err(|e| vec![Problem::NotZip(e.to_string())])?;
-        let mut problems = Vec::new();
+        let mut problems: Vec<Problem> = twins
+            .into_iter()
+            .map(|path| Problem::Unreadable {
+                path: path.trim_end_matches('/').to_string(),
+                reason: "the archive holds two entries of this name; keep one".into(),
+            })
+            .collect();
         let mut total: u64 = 0;
         for i in 0..archive.len() {
             let entry = match archive.by_index_raw(i) {
@@ -100,8 +187,17 @@ impl ZipSource {
                 }
             };
             if !is_safe_path(&name) {
-                problems.push(Problem::UnsafeEntry { path: name });
+                problems.push(Problem::UnsafeEntry {
+                    rule: unsafe_rule(&name),
+                    path: name,
+                });
                 continue;
+            }
+            if entry.encrypted() {
+                problems.push(Problem::Unreadable {
+                    path: name.clone(),
+                    reason: "the entry is encrypted; bundles must be unencrypted zips".into(),
+                });
             }
             total = total.saturating_add(entry.size());
             if let Err(p) = too_large(&name, entry.size(), limits) {
@@ -165,7 +261,16 @@ impl Source for DirSource {
         if !is_safe_path(path) {
             return None;
         }
-        let m = std::fs::metadata(self.root.join(path)).ok()?;
+        let full = self.root.join(path);
+        // A symbolic link is followed only while it stays inside the bundle.
+        let inside = std::fs::canonicalize(&full)
+            .ok()
+            .zip(std::fs::canonicalize(&self.root).ok())
+            .is_some_and(|(f, r)| f.starts_with(r));
+        if !inside {
+            return None;
+        }
+        let m = std::fs::metadata(full).ok()?;
         m.is_file().then_some(m.len())
     }
 
@@ -206,7 +311,10 @@ impl LazyStore {
                 continue;
             }
             if !is_safe_path(&name) {
-                problems.push(Problem::UnsafeEntry { path: name });
+                problems.push(Problem::UnsafeEntry {
+                    rule: unsafe_rule(&name),
+                    path: name,
+                });
                 continue;
             }
             if let Err(p) = too_large(&name, size, limits) {

@@ -6,6 +6,15 @@ use super::manifest::{Camera, Manifest, Mat4Rows, FORMAT, VERSION};
 use super::source::{is_safe_path, Limits, Source};
 use std::collections::HashSet;
 
+/// Farthest a vehicle may be from the world origin, metres (a quarter of the way
+/// round the Earth; a world frame is local, docs/BUNDLE.md).
+pub const MAX_WORLD_M: f64 = 1e7;
+const WORLD_ADVICE: &str = "Positions are metres in a local world frame: subtract a nearby origin \
+    (and record it in world_frame.offset_m).";
+/// Farthest a sensor may be mounted from the vehicle's origin, metres.
+pub const MAX_MOUNT_M: f64 = 100.0;
+const MOUNT_ADVICE: &str = "Mounts are metres in the vehicle frame (check the units).";
+
 /// Largest tolerated deviation of RᵀR from the identity.
 pub const ROTATION_TOLERANCE: f64 = 1e-3;
 
@@ -139,6 +148,12 @@ impl<'a> Validator<'a> {
                 );
             }
             self.rigid("lidar.lidar_to_vehicle", &l.lidar_to_vehicle);
+            self.within(
+                "lidar.lidar_to_vehicle",
+                &l.lidar_to_vehicle,
+                MAX_MOUNT_M,
+                MOUNT_ADVICE,
+            );
         }
         if m.frames.len() < 2 {
             self.problems.push(Problem::TooFewFrames {
@@ -158,13 +173,14 @@ impl<'a> Validator<'a> {
                 );
             }
             last_t = f.timestamp;
-            self.rigid(
-                &format!("frames[{fi}].vehicle_to_world"),
-                &f.vehicle_to_world,
-            );
+            let pose = format!("frames[{fi}].vehicle_to_world");
+            self.rigid(&pose, &f.vehicle_to_world);
+            self.within(&pose, &f.vehicle_to_world, MAX_WORLD_M, WORLD_ADVICE);
             for (vi, v) in f.views.iter().enumerate() {
                 if let Some(t) = &v.vehicle_to_world {
-                    self.rigid(&format!("frames[{fi}].views[{vi}].vehicle_to_world"), t);
+                    let field = format!("frames[{fi}].views[{vi}].vehicle_to_world");
+                    self.rigid(&field, t);
+                    self.within(&field, t, MAX_WORLD_M, WORLD_ADVICE);
                 }
             }
             if f.views.is_empty() {
@@ -275,7 +291,55 @@ impl<'a> Validator<'a> {
                 "focal lengths must be positive pixels",
             );
         }
-        self.rigid(&format!("{f}.camera_to_vehicle"), &c.camera_to_vehicle);
+        let mount = format!("{f}.camera_to_vehicle");
+        self.rigid(&mount, &c.camera_to_vehicle);
+        self.within(&mount, &c.camera_to_vehicle, MAX_MOUNT_M, MOUNT_ADVICE);
+        self.intrinsics(&f, c);
+    }
+
+    /// Focal lengths and principal point against the image: a field of view between
+    /// about 1° and 170°, a principal point within a frame's width of the image.
+    fn intrinsics(&mut self, f: &str, c: &Camera) {
+        if ![c.fx, c.fy, c.cx, c.cy].iter().all(|v| v.is_finite()) || c.fx <= 0.0 || c.fy <= 0.0 {
+            return;
+        }
+        let (w, h) = (c.width.max(1) as f64, c.height.max(1) as f64);
+        for (name, focal, side) in [("fx", c.fx, w), ("fy", c.fy, h)] {
+            if !(0.04 * side..=60.0 * side).contains(&focal) {
+                self.invalid(
+                    format!("{f}.{name}"),
+                    format!(
+                        "{focal} px for an image {side} px across is a field of view outside 1°–170°; \
+                         expected {:.0}–{:.0} px (focal lengths are in pixels, not millimetres)",
+                        0.04 * side,
+                        60.0 * side
+                    ),
+                );
+            }
+        }
+        for (name, v, side) in [("cx", c.cx, w), ("cy", c.cy, h)] {
+            if !(-side..=2.0 * side).contains(&v) {
+                self.invalid(
+                    format!("{f}.{name}"),
+                    format!(
+                        "{v} px lies more than an image away from an image {side} px across; \
+                         expected about {:.0} (the principal point is in pixels from the top-left)",
+                        side / 2.0
+                    ),
+                );
+            }
+        }
+    }
+
+    /// A transform's translation within `limit` metres of the origin.
+    fn within(&mut self, field: &str, t: &Mat4Rows, limit: f64, advice: &str) {
+        let d = t[0][3].hypot(t[1][3]).hypot(t[2][3]);
+        if d > limit {
+            self.invalid(
+                format!("{field} translation"),
+                format!("{d:.3e} m from the origin; expected at most {limit:.0e} m. {advice}"),
+            );
+        }
     }
 
     fn rigid(&mut self, field: &str, t: &Mat4Rows) {

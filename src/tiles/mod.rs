@@ -235,9 +235,17 @@ pub struct Window {
     pub geometry: BevGeometry,
 }
 
+/// The map's layers may take this many times the surfel grid's memory budget.
+pub const MAP_BUDGET_PER_GRID_BUDGET: u64 = 4;
+
 impl Stitcher {
+    /// Host bytes of the blended layers of a map of geometry `g`.
+    pub fn bytes(g: &BevGeometry, channels: usize) -> u64 {
+        g.width as u64 * g.height as u64 * (11 + channels as u64) * 4
+    }
+
     pub fn new(geometry: BevGeometry, channels: usize, min_alpha: f32) -> Self {
-        let n = (geometry.width * geometry.height) as usize;
+        let n = geometry.width as usize * geometry.height as usize;
         Self {
             geometry,
             channels,
@@ -504,6 +512,20 @@ impl TiledRun {
                 };
                 run.model_origin = [run.geometry.origin[0], run.geometry.origin[1], 0.0];
             }
+        }
+        // The map's layers are held whole while tiles are stitched: refuse a map that
+        // would not fit before allocating it.
+        let g = run.geometry;
+        let bytes = Stitcher::bytes(&g, channels);
+        let budget = MAP_BUDGET_PER_GRID_BUDGET * run.cfg.prepare.grid.memory_budget;
+        if bytes > budget {
+            return Err(ReconstructError::MapTooLarge {
+                width: g.width,
+                height: g.height,
+                bytes,
+                budget,
+                resolution: g.resolution,
+            });
         }
         run.stitch = Stitcher::new(run.geometry, channels, min_alpha);
         Ok(run)

@@ -1,0 +1,52 @@
+// Opens a long bundle lazily in headless Chromium and trains its first steps:
+// `node scripts/bench-lazy.mjs BUNDLE.zip [steps] [resolution] [tile_m]`. The bundle is read
+// by ?url= with range requests (a multi-GiB file cannot be dropped by a script).
+// Prints as JSON: the time to a checked bundle, the bytes read to open it, the time
+// to the first step, the wasm heap and the bundle bytes held at most while the
+// steps run (a tile's files), and the bytes read in all. Build the wasm first
+// (wasm-pack build --release --target web --out-dir www/pkg --no-typescript --no-pack).
+import fs from 'node:fs';
+import { openBench } from './bench-browser.mjs';
+
+const [bundle, steps = '40', resolution = '0.2', tileM = '96'] = process.argv.slice(2);
+if (!bundle) {
+  console.error('usage: node scripts/bench-lazy.mjs BUNDLE.zip [steps] [resolution] [tile_m]');
+  process.exit(2);
+}
+const { base, bundleUrl, browser, close } = await openBench(bundle);
+const size = fs.statSync(bundle).size;
+const page = await browser.newPage();
+let read = 0;
+page.on('response', async (r) => {
+  if (r.url().includes('/bench/')) read += Number(r.headers()['content-length'] || 0);
+});
+const t0 = Date.now();
+await page.goto(`${base}/?url=${bundleUrl}&lazy=1`);
+await page.waitForFunction(() => /valid bundle|not a valid|Could not/.test(document.getElementById('status').textContent), null, { timeout: 600_000 });
+const openS = (Date.now() - t0) / 1000;
+const status = await page.textContent('#status');
+if (!/is a valid bundle/.test(status)) {
+  console.error(status);
+  process.exit(1);
+}
+const openRead = read;
+await page.selectOption('#set-resolution', resolution);
+await page.fill('#set-tile', tileM);
+const t1 = Date.now();
+await page.click('#run');
+await page.waitForFunction(() => Number(document.body.dataset.steps || 0) >= 1, null, { timeout: 1_800_000, polling: 200 });
+const firstStepS = (Date.now() - t1) / 1000;
+await page.waitForFunction((n) => Number(document.body.dataset.steps || 0) >= n, Number(steps), { timeout: 1_800_000, polling: 500 });
+const stepsS = (Date.now() - t1) / 1000;
+const heap = await page.evaluate(async () => (await import('/pkg/rogs.js')).wasm_memory_bytes());
+const out = {
+  bundle, bundle_bytes: size, tile_m: Number(tileM), resolution: Number(resolution),
+  open_s: openS, open_bytes_read: openRead,
+  first_step_s: firstStepS, steps: Number(steps), steps_s: stepsS,
+  tiles: Number(await page.getAttribute('body', 'data-tiles')),
+  held_peak_bytes: Number(await page.getAttribute('body', 'data-held-peak')),
+  wasm_heap_bytes: heap, bytes_read: read,
+  progress: await page.textContent('#progress-text'),
+};
+console.log(JSON.stringify(out, null, 2));
+await close();

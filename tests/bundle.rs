@@ -555,3 +555,35 @@ fn a_symbolic_link_out_of_a_bundle_folder_is_not_followed() {
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_file(&outside);
 }
+
+#[test]
+fn a_truth_raster_longer_than_a_camera_image_is_accepted_and_read() {
+    // A long drive's truth spans it: 9 000 px, past the 8 192 px of a camera image.
+    let (mut m, mut files) = example::tiny();
+    let gt = m.ground_truth.as_mut().expect("truth");
+    let (w, h) = (9000, 2);
+    (gt.width, gt.height) = (w, h);
+    let gt = gt.clone();
+    replace(&mut files, &gt.rgb, png_rgb(&image::RgbImage::new(w, h)));
+    replace(
+        &mut files,
+        &gt.class_ids,
+        png_gray(&image::GrayImage::new(w, h)),
+    );
+    replace(
+        &mut files,
+        &gt.valid,
+        png_gray(&image::GrayImage::new(w, h)),
+    );
+    replace(&mut files, &gt.elevation, vec![0; 4 * (w * h) as usize]);
+    let b = open(&m, &files).expect("a long truth is valid");
+    let r = rogs::eval::BevRaster::from_bundle(&b)
+        .expect("readable")
+        .expect("truth");
+    assert_eq!((r.width, r.height), (w, h));
+    // A camera image of that size is still refused.
+    let (mut m, files) = example::tiny();
+    m.cameras[0].width = 9000;
+    let p = named(&problems(&m, &files));
+    assert!(p.iter().any(|(f, _)| f.starts_with("cameras[0]")), "{p:?}");
+}

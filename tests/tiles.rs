@@ -363,5 +363,8 @@ fn a_map_too_large_for_memory_is_refused_with_advice_before_it_is_allocated() {
         Err(e) => e.to_string(),
         Ok(_) => panic!("a 100 km map at 5 cm must be refused"),
     };
-    assert!(e.contains("MiB of layers") && e.contains("coarser resolution"), "{e}");
+    assert!(
+        e.contains("MiB of layers") && e.contains("coarser resolution"),
+        "{e}"
+    );
 }

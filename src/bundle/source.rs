@@ -31,6 +31,23 @@ impl Default for Limits {
     }
 }
 
+/// Largest side of a ground-truth raster: it spans the whole drive (a 3.7 km drive
+/// at 5 cm is 74 000 px long), where a camera image is bounded by `max_image_side`.
+pub const TRUTH_MAX_SIDE: u32 = 1 << 17;
+/// Largest ground-truth file (the elevation raster of a 3.7 km drive is 0.6 GB).
+pub const TRUTH_MAX_FILE_BYTES: u64 = 4 << 30;
+
+impl Limits {
+    /// The limits for the ground truth's rasters.
+    pub fn for_truth(&self) -> Limits {
+        Limits {
+            max_image_side: self.max_image_side.max(TRUTH_MAX_SIDE),
+            max_file_bytes: self.max_file_bytes.max(TRUTH_MAX_FILE_BYTES),
+            ..*self
+        }
+    }
+}
+
 /// True when `path` is a relative '/'-separated path that cannot leave the bundle.
 pub fn is_safe_path(path: &str) -> bool {
     !path.is_empty()
@@ -115,6 +132,11 @@ pub trait Source: Send + Sync {
     fn size(&self, path: &str) -> Option<u64>;
     /// The whole file, refusing it past the limits.
     fn read(&self, path: &str, limits: &Limits) -> Result<Vec<u8>, Problem>;
+    /// Files over `max_file_bytes` but within the truth's limit (allowed only for
+    /// the truth's rasters; validation refuses the others).
+    fn oversize(&self) -> Vec<(String, u64)> {
+        Vec::new()
+    }
 }
 
 fn too_large(path: &str, size: u64, limits: &Limits) -> Result<(), Problem> {
@@ -135,6 +157,7 @@ impl<T: Read + Seek + Send> ReadSeek for T {}
 /// A zip archive, read one entry at a time.
 pub struct ZipSource {
     archive: Mutex<zip::ZipArchive<Box<dyn ReadSeek>>>,
+    oversize: Vec<(String, u64)>,
 }
 
 impl ZipSource {
@@ -171,6 +194,7 @@ impl ZipSource {
             })
             .collect();
         let mut total: u64 = 0;
+        let mut oversize = Vec::new();
         for i in 0..archive.len() {
             let entry = match archive.by_index_raw(i) {
                 Ok(e) => e,
@@ -200,7 +224,12 @@ impl ZipSource {
                 });
             }
             total = total.saturating_add(entry.size());
-            if let Err(p) = too_large(&name, entry.size(), limits) {
+            // The truth's rasters may be larger than other files: validation, which
+            // knows them, refuses any other file over the limit (`oversize`).
+            if entry.size() > limits.max_file_bytes {
+                oversize.push((name.clone(), entry.size()));
+            }
+            if let Err(p) = too_large(&name, entry.size(), &limits.for_truth()) {
                 problems.push(p);
             }
         }
@@ -214,6 +243,7 @@ impl ZipSource {
         if problems.is_empty() {
             Ok(Self {
                 archive: Mutex::new(archive),
+                oversize,
             })
         } else {
             Err(problems)
@@ -222,6 +252,10 @@ impl ZipSource {
 }
 
 impl Source for ZipSource {
+    fn oversize(&self) -> Vec<(String, u64)> {
+        self.oversize.clone()
+    }
+
     fn size(&self, path: &str) -> Option<u64> {
         let mut a = self.archive.lock().ok()?;
         let f = a.by_name(path).ok()?;
@@ -295,6 +329,7 @@ impl Source for DirSource {
 #[derive(Default)]
 pub struct LazyStore {
     sizes: BTreeMap<String, u64>,
+    oversize: Vec<(String, u64)>,
     held: Mutex<HashMap<String, Arc<Vec<u8>>>>,
 }
 
@@ -305,6 +340,7 @@ impl LazyStore {
         let mut problems = Vec::new();
         let mut sizes = BTreeMap::new();
         let mut total: u64 = 0;
+        let mut oversize = Vec::new();
         for (name, size) in entries {
             let name = name.trim_end_matches('/').to_string();
             if name.is_empty() {
@@ -317,7 +353,10 @@ impl LazyStore {
                 });
                 continue;
             }
-            if let Err(p) = too_large(&name, size, limits) {
+            if size > limits.max_file_bytes {
+                oversize.push((name.clone(), size));
+            }
+            if let Err(p) = too_large(&name, size, &limits.for_truth()) {
                 problems.push(p);
             }
             total = total.saturating_add(size);
@@ -338,6 +377,7 @@ impl LazyStore {
         if problems.is_empty() {
             Ok(Self {
                 sizes,
+                oversize,
                 held: Mutex::default(),
             })
         } else {
@@ -395,6 +435,10 @@ impl LazyStore {
 }
 
 impl Source for Arc<LazyStore> {
+    fn oversize(&self) -> Vec<(String, u64)> {
+        self.oversize.clone()
+    }
+
     fn size(&self, path: &str) -> Option<u64> {
         self.sizes.get(path).copied()
     }

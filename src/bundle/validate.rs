@@ -81,7 +81,7 @@ pub fn validate_views(
 
 struct Validator<'a> {
     source: &'a dyn Source,
-    limits: &'a Limits,
+    limits: Limits,
     problems: Vec<Problem>,
     class_ids: [bool; 256],
     /// Whether images and labels are read (false: presence and sizes only).
@@ -92,7 +92,7 @@ impl<'a> Validator<'a> {
     fn new(source: &'a dyn Source, limits: &'a Limits, content: bool) -> Self {
         Self {
             source,
-            limits,
+            limits: *limits,
             problems: Vec::new(),
             class_ids: [false; 256],
             content,
@@ -267,13 +267,19 @@ impl<'a> Validator<'a> {
     }
 
     fn dims(&mut self, field: &str, w: u32, h: u32) {
-        if w == 0 || h == 0 || w > self.limits.max_image_side || h > self.limits.max_image_side {
+        let side = if field == "ground_truth" {
+            self.limits.for_truth().max_image_side
+        } else {
+            self.limits.max_image_side
+        };
+        self.dims_within(field, w, h, side);
+    }
+
+    fn dims_within(&mut self, field: &str, w: u32, h: u32, side: u32) {
+        if w == 0 || h == 0 || w > side || h > side {
             self.invalid(
                 format!("{field}.width/height"),
-                format!(
-                    "{w}×{h}; expected 1..={} pixels per side",
-                    self.limits.max_image_side
-                ),
+                format!("{w}×{h}; expected 1..={} pixels per side", side),
             );
         }
     }
@@ -349,6 +355,21 @@ impl<'a> Validator<'a> {
     }
 
     fn files(&mut self, m: &Manifest, progress: &mut dyn FnMut(usize, usize)) {
+        let truth: HashSet<&str> = m
+            .ground_truth
+            .iter()
+            .flat_map(|gt| [&gt.rgb, &gt.class_ids, &gt.elevation, &gt.valid])
+            .map(|p| p.as_str())
+            .collect();
+        for (path, size) in self.source.oversize() {
+            if !truth.contains(path.as_str()) {
+                self.problems.push(Problem::FileTooLarge {
+                    path,
+                    size,
+                    limit: self.limits.max_file_bytes,
+                });
+            }
+        }
         let refs = m.referenced_files();
         let total = refs.len();
         let mut present = HashSet::new();
@@ -417,6 +438,14 @@ impl<'a> Validator<'a> {
     }
 
     fn truth_images(&mut self, gt: &super::manifest::GroundTruth, present: &HashSet<&str>) {
+        // The truth covers the whole drive: its rasters get the truth's limits.
+        let saved = self.limits;
+        self.limits = saved.for_truth();
+        self.truth_images_within(gt, present);
+        self.limits = saved;
+    }
+
+    fn truth_images_within(&mut self, gt: &super::manifest::GroundTruth, present: &HashSet<&str>) {
         let (w, h) = (gt.width, gt.height);
         for p in [&gt.rgb, &gt.valid] {
             if present.contains(p.as_str()) {
@@ -430,11 +459,11 @@ impl<'a> Validator<'a> {
 
     /// Reads only the header: dimensions are checked without decoding pixels.
     fn image_size(&mut self, path: &str, camera: &str, w: u32, h: u32) {
-        let bytes = match self.source.read(path, self.limits) {
+        let bytes = match self.source.read(path, &self.limits) {
             Ok(b) => b,
             Err(p) => return self.problems.push(p),
         };
-        match image_dims(path, &bytes, self.limits) {
+        match image_dims(path, &bytes, &self.limits) {
             Ok((fw, fh)) if (fw, fh) != (w, h) => self.problems.push(Problem::ImageSize {
                 path: path.into(),
                 camera: camera.into(),
@@ -449,11 +478,11 @@ impl<'a> Validator<'a> {
     }
 
     fn label(&mut self, path: &str, camera: &str, w: u32, h: u32) {
-        let bytes = match self.source.read(path, self.limits) {
+        let bytes = match self.source.read(path, &self.limits) {
             Ok(b) => b,
             Err(p) => return self.problems.push(p),
         };
-        let img = match decode_label(path, &bytes, self.limits) {
+        let img = match decode_label(path, &bytes, &self.limits) {
             Ok(i) => i,
             Err(p) => return self.problems.push(p),
         };

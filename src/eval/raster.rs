@@ -36,16 +36,18 @@ impl BevRaster {
         let Some(gt) = &b.manifest.ground_truth else {
             return Ok(None);
         };
-        let bytes = b.read(&gt.elevation)?;
+        let limits = b.limits.for_truth();
+        let read = |p: &str| b.source().read(p, &limits);
+        let bytes = read(&gt.elevation)?;
         Ok(Some(Self {
             origin: gt.origin,
             resolution: gt.resolution,
             width: gt.width,
             height: gt.height,
-            rgb: b.read_rgb(&gt.rgb)?,
-            class_ids: b.read_label(&gt.class_ids)?,
+            rgb: crate::bundle::decode_rgb(&gt.rgb, &read(&gt.rgb)?, &limits)?,
+            class_ids: crate::bundle::decode_label(&gt.class_ids, &read(&gt.class_ids)?, &limits)?,
             elevation: bytemuck::pod_collect_to_vec(&bytes),
-            valid: b.read_label(&gt.valid)?,
+            valid: crate::bundle::decode_label(&gt.valid, &read(&gt.valid)?, &limits)?,
         }))
     }
 

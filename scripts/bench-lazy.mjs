@@ -3,7 +3,8 @@
 // by ?url= with range requests (a multi-GiB file cannot be dropped by a script).
 // Prints as JSON: the time to a checked bundle, the bytes read to open it, the time
 // to the first step, the wasm heap and the bundle bytes held at most while the
-// steps run (a tile's files), and the bytes read in all. Build the wasm first
+// steps run (a tile's files), and the bytes read in all. ROGS_EAGER=1 reads the
+// bundle whole instead (it must be under 256 MiB), for a side-by-side figure. Build the wasm first
 // (wasm-pack build --release --target web --out-dir www/pkg --no-typescript --no-pack).
 import fs from 'node:fs';
 import { openBench } from './bench-browser.mjs';
@@ -21,7 +22,9 @@ page.on('response', async (r) => {
   if (r.url().includes('/bench/')) read += Number(r.headers()['content-length'] || 0);
 });
 const t0 = Date.now();
-await page.goto(`${base}/?url=${bundleUrl}&lazy=1`);
+// ROGS_EAGER=1: the same run reading the bundle whole, for comparison.
+const eager = process.env.ROGS_EAGER === '1';
+await page.goto(`${base}/?url=${bundleUrl}${eager ? '' : '&lazy=1'}`);
 await page.waitForFunction(() => /valid bundle|not a valid|Could not/.test(document.getElementById('status').textContent), null, { timeout: 600_000 });
 const openS = (Date.now() - t0) / 1000;
 const status = await page.textContent('#status');
@@ -40,7 +43,7 @@ await page.waitForFunction((n) => Number(document.body.dataset.steps || 0) >= n,
 const stepsS = (Date.now() - t1) / 1000;
 const heap = await page.evaluate(async () => (await import('/pkg/rogs.js')).wasm_memory_bytes());
 const out = {
-  bundle, bundle_bytes: size, tile_m: Number(tileM), resolution: Number(resolution),
+  bundle, read: eager ? 'whole' : 'lazily', bundle_bytes: size, tile_m: Number(tileM), resolution: Number(resolution),
   open_s: openS, open_bytes_read: openRead,
   first_step_s: firstStepS, steps: Number(steps), steps_s: stepsS,
   tiles: Number(await page.getAttribute('body', 'data-tiles')),

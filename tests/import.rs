@@ -200,7 +200,7 @@ fn kitti_camera_2_velodyne_times_and_frame_range() {
         .collect();
     write(&root.join("poses/07.txt"), poses);
     write(&seq.join("times.txt"), "0.0\n0.11\n0.2\n0.31\n");
-    let rgb = rogs::bundle::example::png_rgb(&image::RgbImage::new(8, 6));
+    let rgb = rogs::bundle::example::png_rgb(&image::RgbImage::new(1241, 376));
     for i in 0..4 {
         write(&seq.join(format!("image_2/{i:06}.png")), &rgb);
         let pts: Vec<u8> = [1.0f32, 2.0, 3.0, 0.5, 4.0, 5.0, 6.0, 0.25]

@@ -587,3 +587,49 @@ fn a_truth_raster_longer_than_a_camera_image_is_accepted_and_read() {
     let p = named(&problems(&m, &files));
     assert!(p.iter().any(|(f, _)| f.starts_with("cameras[0]")), "{p:?}");
 }
+
+#[test]
+fn unknown_fields_are_warned_about_with_the_nearest_known_name() {
+    let (m, files) = example::tiny();
+    let mut v = serde_json::to_value(&m).expect("json");
+    v["corridor_half_width"] = 6.0.into();
+    v["frames"][1]["views"][0]["vehicle_to_wrld"] = serde_json::Value::Null;
+    v["cameras"][0]["colour"] = "red".into();
+    let mut files = files;
+    files.retain(|(p, _)| p != "manifest.json");
+    let mut z = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    let opts = zip::write::SimpleFileOptions::default();
+    z.start_file("manifest.json", opts).expect("entry");
+    std::io::Write::write_all(&mut z, &serde_json::to_vec(&v).expect("json")).expect("write");
+    for (path, bytes) in &files {
+        z.start_file(path.as_str(), opts).expect("entry");
+        std::io::Write::write_all(&mut z, bytes).expect("write");
+    }
+    let bytes = z.finish().expect("zip").into_inner();
+    let b = Bundle::from_zip_bytes(bytes, Limits::default()).expect("still valid");
+    let w = &b.warnings;
+    assert_eq!(w.len(), 3, "{w:?}");
+    assert!(
+        w.iter().any(|w| w.starts_with("corridor_half_width:")
+            && w.contains("did you mean corridor_half_width_m?")),
+        "{w:?}"
+    );
+    assert!(
+        w.iter()
+            .any(|w| w.starts_with("frames[1].views[0].vehicle_to_wrld:")
+                && w.contains("did you mean vehicle_to_world?")),
+        "{w:?}"
+    );
+    assert!(
+        w.iter()
+            .any(|w| w.starts_with("cameras[0].colour: unknown field, ignored")),
+        "{w:?}"
+    );
+    assert!(b
+        .summary()
+        .to_text()
+        .contains("warning     corridor_half_width"));
+    // A bundle as written by rogs has none.
+    let (m, files) = example::tiny();
+    assert!(open(&m, &files).expect("valid").warnings.is_empty());
+}

@@ -421,3 +421,57 @@ fn revisit_drives_share_the_road_and_differ_in_the_rest() {
     };
     assert_ne!(err(&o1), err(&o2));
 }
+
+#[test]
+fn long_drives_out_and_back_so_every_place_is_seen_on_two_passes() {
+    let mut c = SynthConfig::preset(Preset::Long, 1);
+    c.set_length_m(80.0);
+    (c.width, c.height, c.rays_per_axis) = (160, 48, 1);
+    c.truth_resolution = 0.2;
+    let out = generate(&c, &|_, _, _| {}).expect("synth");
+    let m = &out.manifest;
+    let n = m.frames.len();
+    // Frame k and frame n-1-k stand at the same place, facing the other way, one
+    // lane apart (2 × 1.75 m).
+    for k in [0, n / 4, n / 2 - 2] {
+        let (a, b) = (
+            &m.frames[k].vehicle_to_world,
+            &m.frames[n - 1 - k].vehicle_to_world,
+        );
+        let d = (a[0][3] - b[0][3]).hypot(a[1][3] - b[1][3]);
+        assert!(
+            (d - 3.5).abs() < 0.3,
+            "frames {k} and {}: {d} m apart",
+            n - 1 - k
+        );
+        let dot = a[0][0] * b[0][0] + a[1][0] * b[1][0];
+        assert!(dot < -0.99, "frames {k} and {}: headings {dot}", n - 1 - k);
+    }
+    assert!(
+        (m.trajectory_length_m() - 80.0).abs() < 5.0,
+        "{} m",
+        m.trajectory_length_m()
+    );
+    // A valid bundle, whose tiles are trained by views of both passes.
+    let zip = write_zip(m, &out.files).expect("zip");
+    let b = Bundle::from_zip_bytes(zip, Limits::default()).expect("valid bundle");
+    let mut cfg = rogs::reconstruct::ReconstructConfig::default();
+    cfg.prepare.grid.resolution = 0.2;
+    let tiles = rogs::tiles::plan(
+        &b,
+        &cfg,
+        &rogs::tiles::TileConfig {
+            size_m: 16.0,
+            overlap_m: 2.0,
+        },
+    );
+    let both = tiles
+        .iter()
+        .filter(|t| t.views.iter().any(|v| v.0 < n / 2) && t.views.iter().any(|v| v.0 >= n / 2))
+        .count();
+    assert!(
+        both * 2 >= tiles.len(),
+        "{both} of {} tiles seen on both passes",
+        tiles.len()
+    );
+}

@@ -76,6 +76,8 @@ function showSummary(s, source) {
     ['ground truth', s.ground_truth ? `BEV ${s.ground_truth.width}×${s.ground_truth.height} at ${s.ground_truth.resolution_m} m` : 'none'],
     ['world frame', s.world_frame || 'local (the bundle names no dataset frame)'],
     ['corridor', s.corridor_half_width_m ? `${s.corridor_half_width_m} m either side (the bundle's)` : 'not given: 4 m either side'],
+    // Fields rogs ignores (a misspelled optional field, with the nearest known name).
+    ...(s.warnings?.length ? [['warnings', s.warnings.join('; ')]] : []),
   ];
   const dl = $('summary-facts');
   dl.innerHTML = '';

@@ -190,6 +190,7 @@ impl Bundle {
         m.ground_truth = None;
         let mut drives = Vec::new();
         let mut parts: Vec<Box<dyn Source>> = Vec::new();
+        let mut warnings: Vec<String> = Vec::new();
         let mut limits = bundles[0].limits;
         for (k, b) in bundles.into_iter().enumerate() {
             let bm = &b.manifest;
@@ -260,12 +261,14 @@ impl Bundle {
                 frames: start..m.frames.len(),
             });
             limits = b.limits;
+            warnings.extend(b.warnings.iter().map(|w| format!("{}: {w}", name(k))));
             parts.push(b.source);
         }
         Ok(Bundle {
             manifest: m,
             limits,
             drives,
+            warnings,
             source: Box::new(MergedSource { parts }),
         })
     }

@@ -12,6 +12,7 @@ mod merge;
 mod source;
 mod summary;
 pub mod transform;
+mod unknown;
 mod validate;
 mod write;
 
@@ -59,6 +60,9 @@ pub struct Bundle {
     /// The drives whose frames the manifest holds, in order (one for a bundle as
     /// read; several after `Bundle::merge`).
     pub drives: Vec<Drive>,
+    /// What the bundle holds that rogs ignores (unknown manifest fields, named with
+    /// the nearest known one): shown by `rogs inspect` and the page.
+    pub warnings: Vec<String>,
     source: Box<dyn Source>,
 }
 
@@ -127,15 +131,16 @@ impl Bundle {
         if !problems.is_empty() {
             return Err(BundleErrors(problems));
         }
-        Ok(Self::checked(manifest, limits, source))
+        Ok(Self::checked(manifest, limits, source, &text))
     }
 
-    fn checked(manifest: Manifest, limits: Limits, source: Box<dyn Source>) -> Self {
+    fn checked(manifest: Manifest, limits: Limits, source: Box<dyn Source>, text: &[u8]) -> Self {
         let drives = vec![Drive {
             name: manifest.name.clone(),
             frames: 0..manifest.frames.len(),
         }];
         Self {
+            warnings: unknown::unknown_fields(text, &manifest),
             manifest,
             limits,
             drives,
@@ -160,7 +165,7 @@ impl Bundle {
         if !problems.is_empty() {
             return Err(BundleErrors(problems));
         }
-        Ok(Self::checked(manifest, limits, source))
+        Ok(Self::checked(manifest, limits, source, &text))
     }
 
     /// The files of view `view` of frame `frame` (image, label).
@@ -215,6 +220,8 @@ impl Bundle {
     }
 
     pub fn summary(&self) -> Summary {
-        Summary::of(&self.manifest, self.source.as_ref())
+        let mut s = Summary::of(&self.manifest, self.source.as_ref());
+        s.warnings = self.warnings.clone();
+        s
     }
 }

@@ -21,6 +21,8 @@ pub struct Summary {
     pub corridor_half_width_m: Option<f64>,
     /// The dataset frame the poses are in, in words (none: a local frame).
     pub world_frame: Option<String>,
+    /// Things the bundle holds that rogs ignores (e.g. a misspelled optional field).
+    pub warnings: Vec<String>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -99,6 +101,7 @@ impl Summary {
             }),
             corridor_half_width_m: m.corridor_half_width_m,
             world_frame: m.world_frame.as_ref().map(|_| m.frame_description()),
+            warnings: Vec::new(),
         }
     }
 
@@ -143,6 +146,9 @@ impl Summary {
                 )
             }
             None => s += "truth       none\n",
+        }
+        for w in &self.warnings {
+            s += &format!("warning     {w}\n");
         }
         s
     }

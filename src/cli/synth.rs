@@ -12,7 +12,9 @@ use std::sync::Mutex;
 pub struct Args {
     /// tiny (unit tests, 1 camera 64×48), demo (3 cameras, ~25 m), nuscenes-like
     /// (6 cameras at 800×225, 240 frames, ~200 m), highway (3.7 km of gently curving
-    /// road, one 1241×376 camera; see --length-m) or revisit (demo's rig, several
+    /// road, one 1241×376 camera; see --length-m), long (KITTI 00's size: 3.7 km in
+    /// 4 541 frames of one 1241×376 camera, out along highway's road and back, so
+    /// that it revisits every street; see --length-m) or revisit (demo's rig, several
     /// drives of one road: see --drive).
     #[arg(long, default_value = "tiny")]
     preset: Preset,

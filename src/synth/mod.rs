@@ -21,7 +21,7 @@ use crate::bundle::{
     BundleFile, Camera, Frame, GroundTruth, LidarSensor, Manifest, Mat4Rows, View, FORMAT, VERSION,
 };
 use raycast::{render, Exposure};
-use rig::{camera_to_vehicle, lidar_sweep, mul, noisy_poses, vehicle_pose, PoseNoise};
+use rig::{camera_to_vehicle, lidar_sweep, mul, noisy_poses, PoseNoise};
 use rng::Rng;
 use road::RoadSpec;
 use world::World;
@@ -38,6 +38,12 @@ pub enum Preset {
     /// forward camera at KITTI's 1241×376, a frame every metre, 10 cm height field.
     /// For scaling runs (`--length-m` shortens it) and map-viewer benchmarks.
     Highway,
+    /// KITTI odometry 00's size: a 3.7 km drive of 4 541 frames, one forward camera
+    /// at 1241×376, that revisits its own streets: it drives `highway`'s road out
+    /// and back (a U-turn at the far end, then the opposite lane home), so every
+    /// place is seen on two passes, in opposite directions, 1.85 km of drive apart.
+    /// `--length-m` shortens it.
+    Long,
     /// `demo`'s rig on a road twice as long, driven several times (`drive` 1, 2, …):
     /// each drive starts 40 % of a trajectory further on, at another time, with
     /// other camera exposures, other parked cars and other pose noise, in one world
@@ -53,9 +59,10 @@ impl std::str::FromStr for Preset {
             "demo" => Ok(Preset::Demo),
             "nuscenes-like" => Ok(Preset::NuscenesLike),
             "highway" => Ok(Preset::Highway),
+            "long" => Ok(Preset::Long),
             "revisit" => Ok(Preset::Revisit),
             _ => Err(format!(
-                "unknown preset {s:?}; expected tiny, demo, nuscenes-like, highway or revisit"
+                "unknown preset {s:?}; expected tiny, demo, nuscenes-like, highway, long or revisit"
             )),
         }
     }
@@ -135,6 +142,12 @@ impl SynthConfig {
                 field_cell: 0.05,
                 ..base
             },
+            Preset::Long => SynthConfig {
+                preset,
+                frames: 4541,
+                frame_spacing_m: 3700.0 / 4540.0,
+                ..Self::preset(Preset::Highway, seed)
+            },
             Preset::Highway => SynthConfig {
                 frames: 3701,
                 width: 1241,
@@ -165,7 +178,21 @@ impl SynthConfig {
     fn road_trajectory_length(&self) -> f64 {
         match self.preset {
             Preset::Revisit => 2.0 * self.trajectory_length(),
+            // Out and back: the road is half the drive.
+            Preset::Long => 0.5 * self.trajectory_length(),
             _ => self.trajectory_length(),
+        }
+    }
+
+    /// Where the vehicle is after `d` metres of drive: the arc length on the road and
+    /// whether it drives back (`long` turns round halfway, into the other lane).
+    pub fn arc_of(&self, d: f64) -> (f64, bool) {
+        let s0 = self.start_s();
+        match self.preset {
+            Preset::Long if d > self.road_trajectory_length() => {
+                (s0 + self.trajectory_length() - d, true)
+            }
+            _ => (s0 + d, false),
         }
     }
 
@@ -204,7 +231,7 @@ pub fn road_spec(cfg: &SynthConfig) -> RoadSpec {
     let s0 = ROAD_START;
     let lt = cfg.road_trajectory_length();
     let total = s0 + lt + 45.0;
-    let pieces = if cfg.preset == Preset::Highway {
+    let pieces = if matches!(cfg.preset, Preset::Highway | Preset::Long) {
         // Curves of 12 km radius: over 3.7 km the road drifts about 100 m sideways,
         // so its bounding box, and the height field over it, stay slim.
         let p = total / 5.0;
@@ -261,6 +288,7 @@ pub fn world_and_poses(cfg: &SynthConfig, progress: Progress) -> (World, Vec<Mat
     // on every drive).
     let (c0, lc) = match cfg.preset {
         Preset::Revisit => (ROAD_START, cfg.road_trajectory_length()),
+        Preset::Long => (s0, cfg.road_trajectory_length()),
         _ => (s0, lt),
     };
     let mut crng = cfg.drive_rng(&rng, 0xca5);
@@ -281,9 +309,15 @@ pub fn world_and_poses(cfg: &SynthConfig, progress: Progress) -> (World, Vec<Mat
     progress("world", 1, 1);
 
     let true_poses: Vec<Mat4Rows> = (0..cfg.frames)
-        .map(|k| vehicle_pose(&world, s0 + k as f64 * cfg.frame_spacing_m))
+        .map(|k| drive_pose(&world, cfg, k as f64 * cfg.frame_spacing_m))
         .collect();
     (world, true_poses)
+}
+
+/// The true vehicle pose after `d` metres of the drive.
+fn drive_pose(world: &World, cfg: &SynthConfig, d: f64) -> Mat4Rows {
+    let (s, back) = cfg.arc_of(d);
+    rig::vehicle_pose_on(world, s, back)
 }
 
 /// Generates the scene. Deterministic for a config (and independent of thread count).
@@ -352,14 +386,12 @@ pub fn generate(cfg: &SynthConfig, progress: Progress) -> Result<SynthOutput, St
         .collect();
 
     // Where each camera fired: its own true vehicle pose (and the frame's noise).
-    let s0 = cfg.start_s();
     let fired = |k: usize, c: usize| -> Mat4Rows {
         if cfg.camera_stagger_s == 0.0 || c == 0 {
             return true_poses[k];
         }
-        let s =
-            s0 + k as f64 * cfg.frame_spacing_m + c as f64 * cfg.camera_stagger_s * cfg.speed_mps;
-        vehicle_pose(&world, s)
+        let d = k as f64 * cfg.frame_spacing_m + c as f64 * cfg.camera_stagger_s * cfg.speed_mps;
+        drive_pose(&world, cfg, d)
     };
     let views = cfg.frames * cfg.cameras;
     let done = std::sync::atomic::AtomicUsize::new(0);

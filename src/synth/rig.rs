@@ -34,15 +34,18 @@ fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
 /// True vehicle pose at arc length s: on the ground, axes from the road under the
 /// wheels (wheelbase 2.8 m, track 1.6 m), so it pitches on the bump and rolls with the
 /// cross-fall.
-pub fn vehicle_pose(w: &World, s: f64) -> Mat4Rows {
+///
+/// Driving towards decreasing `s`, in the other lane, when `back`.
+pub fn vehicle_pose_on(w: &World, s: f64, back: bool) -> Mat4Rows {
     let p = |s: f64, t: f64| {
         let (x, y, _) = w.line.point(s, t);
         [x, y, w.field.height(x, y).unwrap_or(0.0)]
     };
-    let c = p(s, LANE_T);
+    let (lane, dir) = if back { (-LANE_T, -1.0) } else { (LANE_T, 1.0) };
+    let c = p(s, lane);
     let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-    let fwd = normalize(sub(p(s + 1.4, LANE_T), p(s - 1.4, LANE_T)));
-    let left0 = normalize(sub(p(s, LANE_T + 0.8), p(s, LANE_T - 0.8)));
+    let fwd = normalize(sub(p(s + 1.4 * dir, lane), p(s - 1.4 * dir, lane)));
+    let left0 = normalize(sub(p(s, lane + 0.8 * dir), p(s, lane - 0.8 * dir)));
     let up = normalize(cross(fwd, left0));
     let left = cross(up, fwd);
     mat(

@@ -97,6 +97,17 @@ pub fn aligns(cfg: &ReconstructConfig) -> Option<&AlignConfig> {
 }
 
 impl ReconstructError {
+    /// True when the input (the bundle, or the settings for it) is at fault, not
+    /// the machine: the user fixes this one.
+    pub fn is_input(&self) -> bool {
+        match self {
+            Self::Prepare(_) | Self::Bundle(_) | Self::NoViews | Self::EmptyTile => true,
+            Self::MapTooLarge { .. } => true,
+            Self::Gpu(_) | Self::Train(_) => false,
+            Self::Tile { source, .. } => source.is_input(),
+        }
+    }
+
     /// The bundle file this error waits for, when it is only that a lazily read
     /// bundle has not provided it yet (not a failure: provide it and step again).
     pub fn not_loaded(&self) -> Option<&str> {

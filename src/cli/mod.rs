@@ -14,8 +14,12 @@ mod synth;
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
-/// Exit code for input the user must fix (an invalid bundle).
-pub const EXIT_INVALID_INPUT: u8 = 2;
+/// Exit code for input the user must fix (an invalid bundle or map, a map too large
+/// for the settings). 2 is the argument parser's (a misspelled flag or value).
+pub const EXIT_INVALID_INPUT: u8 = 3;
+/// Exit code when the machine could not do it (no GPU adapter, a device lost, a
+/// file that cannot be written, a run stopped part-way: what was finished is kept).
+pub const EXIT_MACHINE: u8 = 4;
 
 #[derive(Parser)]
 #[command(
@@ -38,7 +42,7 @@ enum Command {
     /// Validate a scene bundle and print its summary, or every problem found.
     ///
     /// Prints cameras, frames, trajectory length, classes, LiDAR points and whether
-    /// ground truth is present. Exits with code 2 when the bundle is invalid, listing
+    /// ground truth is present. Exits with code 3 when the bundle is invalid, listing
     /// each problem with the file or manifest field it concerns.
     Inspect(inspect::Args),
     /// Report the GPU adapter and run a compute self-test against the CPU.
@@ -72,7 +76,7 @@ enum Command {
     /// Convert a public dataset (KITTI odometry, nuScenes) into a scene bundle.
     ///
     /// Images are streamed into the zip one at a time; the result is validated like
-    /// `rogs inspect` does before it is moved into place (exit code 2 and every
+    /// `rogs inspect` does before it is moved into place (exit code 3 and every
     /// problem listed when it is invalid). docs/IMPORT.md describes the layouts and
     /// every transform.
     Import(import::Args),
@@ -108,7 +112,7 @@ pub fn run() -> ExitCode {
         Ok(code) => code,
         Err(e) => {
             eprintln!("error: {e}");
-            ExitCode::FAILURE
+            ExitCode::from(EXIT_MACHINE)
         }
     }
 }

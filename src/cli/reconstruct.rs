@@ -4,7 +4,7 @@
 //! are trained tile by tile (`--tile-m`).
 
 use super::progress::Progress;
-use super::EXIT_INVALID_INPUT;
+use super::{EXIT_INVALID_INPUT, EXIT_MACHINE};
 use crate::bundle::{Bundle, Limits};
 use crate::gpu::GpuContext;
 use crate::init::InitMethod;
@@ -184,8 +184,14 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
     let tiling = crate::tiles::choose(&b.manifest, &cfg, asked);
     let ctx = GpuContext::new_blocking().map_err(|e| e.to_string())?;
     eprintln!("preparing surfels…");
-    let mut run =
-        pollster::block_on(TiledRun::new(&mut b, cfg, tiling, ctx)).map_err(|e| e.to_string())?;
+    let mut run = match pollster::block_on(TiledRun::new(&mut b, cfg, tiling, ctx)) {
+        Ok(r) => r,
+        Err(e) if e.is_input() => {
+            eprintln!("cannot map this bundle with these settings: {e}");
+            return Ok(ExitCode::from(EXIT_INVALID_INPUT));
+        }
+        Err(e) => return Err(e.to_string()),
+    };
     match &run.tiling {
         Some(t) => eprintln!(
             "{} tiles of {} m (overlap {} m), {} steps planned, {} drive(s)",
@@ -263,7 +269,7 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
         a.out.display()
     );
     Ok(if stopped.is_some() {
-        ExitCode::FAILURE
+        ExitCode::from(EXIT_MACHINE)
     } else {
         ExitCode::SUCCESS
     })

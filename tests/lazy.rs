@@ -5,13 +5,14 @@
 //! refused by name when it arrives.
 #![cfg(not(target_arch = "wasm32"))]
 
+mod common;
+
 use rogs::bundle::{write_zip, Bundle, LazyFiles, LazyStore, Limits, Manifest};
 use rogs::gpu::GpuContext;
 use rogs::reconstruct::{Outcome, ReconstructConfig};
 use rogs::synth::{generate, Preset, SynthConfig};
 use rogs::tiles::{finish_lazy, start_lazy, step_lazy, Fetch, Fetched, TileConfig, TiledRun};
 use std::collections::HashMap;
-use std::io::Read;
 use std::sync::{Arc, Mutex};
 
 fn ctx() -> GpuContext {
@@ -30,17 +31,8 @@ fn demo_zip(length_m: Option<f64>) -> (Manifest, Vec<u8>) {
     (out.manifest, zip)
 }
 
-/// Every entry of a zip, inflated: what the page's reader returns, entry by entry.
 fn entries(zip: &[u8]) -> HashMap<String, Vec<u8>> {
-    let mut a = zip::ZipArchive::new(std::io::Cursor::new(zip)).expect("zip");
-    (0..a.len())
-        .map(|i| {
-            let mut f = a.by_index(i).expect("entry");
-            let mut v = Vec::new();
-            f.read_to_end(&mut v).expect("read");
-            (f.name().expect("name").to_string(), v)
-        })
-        .collect()
+    common::zip_entries(zip).into_iter().collect()
 }
 
 fn cfg() -> ReconstructConfig {

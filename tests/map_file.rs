@@ -3,13 +3,14 @@
 //! and damaged copies refused with the entry or field named.
 #![cfg(not(target_arch = "wasm32"))]
 
+mod common;
+
 use rogs::bundle::{Bundle, Limits, ZipBundleWriter};
 use rogs::export::map_file::{validate, write, MapIndex, INDEX, TILE};
 use rogs::gpu::GpuContext;
 use rogs::reconstruct::{Outcome, ReconstructConfig};
 use rogs::synth::{generate, Preset, SynthConfig};
 use rogs::tiles::TiledRun;
-use std::io::Read;
 
 /// The IPM baseline map of the demo scene at 2 cm (a map of several tiles and levels).
 fn outcome() -> (Bundle, Outcome) {
@@ -32,15 +33,7 @@ fn outcome() -> (Bundle, Outcome) {
 }
 
 fn entries(zip: &[u8]) -> Vec<(String, Vec<u8>)> {
-    let mut a = zip::ZipArchive::new(std::io::Cursor::new(zip)).expect("zip");
-    (0..a.len())
-        .map(|i| {
-            let mut f = a.by_index(i).expect("entry");
-            let mut v = Vec::new();
-            f.read_to_end(&mut v).expect("read");
-            (f.name().expect("name").to_string(), v)
-        })
-        .collect()
+    common::zip_entries(zip)
 }
 
 fn rezip(files: &[(String, Vec<u8>)]) -> Vec<u8> {

@@ -17,7 +17,7 @@ pub enum Problem {
     Format { found: String },
     #[error("version: found {found}, this build reads version {supported}")]
     Version { found: u32, supported: u32 },
-    #[error("{field}: path {path:?} is not allowed: {}; paths must be relative '/'-separated paths inside the bundle", super::source::unsafe_rule(path))]
+    #[error("{field}: path {path:?} is not allowed: {}; paths must be relative '/'-separated paths inside the bundle", unsafe_rule(path))]
     UnsafePath { field: String, path: String },
     #[error("{field}: file {path:?} is not in the bundle")]
     MissingFile { field: String, path: String },
@@ -130,4 +130,25 @@ fn render(problems: &[Problem]) -> String {
         s.push_str(&p.to_string());
     }
     s
+}
+
+/// The rule an unsafe path breaks, in words.
+pub fn unsafe_rule(path: &str) -> &'static str {
+    if path.is_empty() {
+        "it is empty"
+    } else if path.starts_with('/') {
+        "it is absolute (starts with '/')"
+    } else if path.contains('\\') {
+        "it contains '\\' (use '/')"
+    } else if path.contains(':') {
+        "it contains ':' (a drive letter or stream name)"
+    } else if path.contains('\0') {
+        "it contains a NUL byte"
+    } else if path.split('/').any(|c| c == "..") {
+        "it contains a '..' component"
+    } else if path.split('/').any(|c| c == ".") {
+        "it contains a '.' component"
+    } else {
+        "it contains an empty component ('//')"
+    }
 }

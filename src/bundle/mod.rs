@@ -119,7 +119,17 @@ impl Bundle {
         store: std::sync::Arc<LazyStore>,
         limits: Limits,
     ) -> Result<Self, BundleErrors> {
-        let source: Box<dyn Source> = Box::new(store);
+        Self::open_with(Box::new(store), limits, &mut |m, s, l| {
+            validate::validate_structure(m, s, l)
+        })
+    }
+
+    /// Reads the manifest from `source`, checks the bundle with `check`.
+    fn open_with(
+        source: Box<dyn Source>,
+        limits: Limits,
+        check: &mut dyn FnMut(&Manifest, &dyn Source, &Limits) -> Vec<Problem>,
+    ) -> Result<Self, BundleErrors> {
         if source.size(MANIFEST).is_none() {
             return Err(BundleErrors(vec![Problem::MissingManifest]));
         }
@@ -127,7 +137,7 @@ impl Bundle {
             .read(MANIFEST, &limits)
             .map_err(|p| BundleErrors(vec![p]))?;
         let manifest = parse_manifest(&text).map_err(|p| BundleErrors(vec![p]))?;
-        let problems = validate::validate_structure(&manifest, source.as_ref(), &limits);
+        let problems = check(&manifest, source.as_ref(), &limits);
         if !problems.is_empty() {
             return Err(BundleErrors(problems));
         }
@@ -154,18 +164,9 @@ impl Bundle {
         limits: Limits,
         progress: &mut dyn FnMut(usize, usize),
     ) -> Result<Self, BundleErrors> {
-        if source.size(MANIFEST).is_none() {
-            return Err(BundleErrors(vec![Problem::MissingManifest]));
-        }
-        let text = source
-            .read(MANIFEST, &limits)
-            .map_err(|p| BundleErrors(vec![p]))?;
-        let manifest = parse_manifest(&text).map_err(|p| BundleErrors(vec![p]))?;
-        let problems = validate::validate(&manifest, source.as_ref(), &limits, progress);
-        if !problems.is_empty() {
-            return Err(BundleErrors(problems));
-        }
-        Ok(Self::checked(manifest, limits, source, &text))
+        Self::open_with(source, limits, &mut |m, s, l| {
+            validate::validate(m, s, l, progress)
+        })
     }
 
     /// The files of view `view` of frame `frame` (image, label).

@@ -5,7 +5,7 @@
 //! limits, so that a hostile bundle (a zip bomb, a path escaping the folder) is
 //! refused before anything is inflated.
 
-use super::error::Problem;
+use super::error::{unsafe_rule, Problem};
 use std::collections::{BTreeMap, HashMap};
 use std::io::{Cursor, Read, Seek};
 use std::sync::{Arc, Mutex};
@@ -105,27 +105,6 @@ fn central_names(r: &mut dyn ReadSeek) -> Option<Vec<String>> {
     Some(names)
 }
 
-/// The rule an unsafe path breaks, in words.
-pub fn unsafe_rule(path: &str) -> &'static str {
-    if path.is_empty() {
-        "it is empty"
-    } else if path.starts_with('/') {
-        "it is absolute (starts with '/')"
-    } else if path.contains('\\') {
-        "it contains '\\' (use '/')"
-    } else if path.contains(':') {
-        "it contains ':' (a drive letter or stream name)"
-    } else if path.contains('\0') {
-        "it contains a NUL byte"
-    } else if path.split('/').any(|c| c == "..") {
-        "it contains a '..' component"
-    } else if path.split('/').any(|c| c == ".") {
-        "it contains a '.' component"
-    } else {
-        "it contains an empty component ('//')"
-    }
-}
-
 /// A readable set of named files.
 pub trait Source: Send + Sync {
     /// Uncompressed size, or `None` when the file is absent.
@@ -148,6 +127,51 @@ fn too_large(path: &str, size: u64, limits: &Limits) -> Result<(), Problem> {
         });
     }
     Ok(())
+}
+
+/// The checks every archive's table of entries gets, before anything is inflated:
+/// safe names, each entry and the total within the limits. Entries over the file
+/// limit but within the truth's are set aside (`oversize`) for validation, which
+/// knows which files are the truth's.
+#[derive(Default)]
+struct EntryTable {
+    problems: Vec<Problem>,
+    total: u64,
+    oversize: Vec<(String, u64)>,
+}
+
+impl EntryTable {
+    /// Checks one entry; false when its name is refused.
+    fn entry(&mut self, name: &str, size: u64, limits: &Limits) -> bool {
+        if !is_safe_path(name) {
+            self.problems.push(Problem::UnsafeEntry {
+                rule: unsafe_rule(name),
+                path: name.into(),
+            });
+            return false;
+        }
+        self.total = self.total.saturating_add(size);
+        if size > limits.max_file_bytes {
+            self.oversize.push((name.into(), size));
+        }
+        if let Err(p) = too_large(name, size, &limits.for_truth()) {
+            self.problems.push(p);
+        }
+        true
+    }
+
+    /// The oversize entries; the problems found are added to `problems`.
+    fn finish(mut self, limits: &Limits, problems: &mut Vec<Problem>) -> Vec<(String, u64)> {
+        if self.total > limits.max_total_bytes {
+            self.problems.push(Problem::FileTooLarge {
+                path: "(whole archive)".into(),
+                size: self.total,
+                limit: limits.max_total_bytes,
+            });
+        }
+        problems.append(&mut self.problems);
+        self.oversize
+    }
 }
 
 /// What a zip archive can be read from: bytes in memory, or natively its file.
@@ -193,8 +217,7 @@ impl ZipSource {
                 reason: "the archive holds two entries of this name; keep one".into(),
             })
             .collect();
-        let mut total: u64 = 0;
-        let mut oversize = Vec::new();
+        let mut table = EntryTable::default();
         for i in 0..archive.len() {
             let entry = match archive.by_index_raw(i) {
                 Ok(e) => e,
@@ -210,36 +233,14 @@ impl ZipSource {
                     continue;
                 }
             };
-            if !is_safe_path(&name) {
-                problems.push(Problem::UnsafeEntry {
-                    rule: unsafe_rule(&name),
-                    path: name,
-                });
-                continue;
-            }
-            if entry.encrypted() {
+            if table.entry(&name, entry.size(), limits) && entry.encrypted() {
                 problems.push(Problem::Unreadable {
                     path: name.clone(),
                     reason: "the entry is encrypted; bundles must be unencrypted zips".into(),
                 });
             }
-            total = total.saturating_add(entry.size());
-            // The truth's rasters may be larger than other files: validation, which
-            // knows them, refuses any other file over the limit (`oversize`).
-            if entry.size() > limits.max_file_bytes {
-                oversize.push((name.clone(), entry.size()));
-            }
-            if let Err(p) = too_large(&name, entry.size(), &limits.for_truth()) {
-                problems.push(p);
-            }
         }
-        if total > limits.max_total_bytes {
-            problems.push(Problem::FileTooLarge {
-                path: "(whole archive)".into(),
-                size: total,
-                limit: limits.max_total_bytes,
-            });
-        }
+        let oversize = table.finish(limits, &mut problems);
         if problems.is_empty() {
             Ok(Self {
                 archive: Mutex::new(archive),
@@ -339,41 +340,20 @@ impl LazyStore {
     pub fn new(entries: Vec<(String, u64)>, limits: &Limits) -> Result<Self, Vec<Problem>> {
         let mut problems = Vec::new();
         let mut sizes = BTreeMap::new();
-        let mut total: u64 = 0;
-        let mut oversize = Vec::new();
+        let mut table = EntryTable::default();
         for (name, size) in entries {
             let name = name.trim_end_matches('/').to_string();
-            if name.is_empty() {
+            if name.is_empty() || !table.entry(&name, size, limits) {
                 continue;
             }
-            if !is_safe_path(&name) {
-                problems.push(Problem::UnsafeEntry {
-                    rule: unsafe_rule(&name),
-                    path: name,
-                });
-                continue;
-            }
-            if size > limits.max_file_bytes {
-                oversize.push((name.clone(), size));
-            }
-            if let Err(p) = too_large(&name, size, &limits.for_truth()) {
-                problems.push(p);
-            }
-            total = total.saturating_add(size);
             if sizes.insert(name.clone(), size).is_some() {
                 problems.push(Problem::Unreadable {
                     path: name,
-                    reason: "the archive holds two entries of this name".into(),
+                    reason: "the archive holds two entries of this name; keep one".into(),
                 });
             }
         }
-        if total > limits.max_total_bytes {
-            problems.push(Problem::FileTooLarge {
-                path: "(whole archive)".into(),
-                size: total,
-                limit: limits.max_total_bytes,
-            });
-        }
+        let oversize = table.finish(limits, &mut problems);
         if problems.is_empty() {
             Ok(Self {
                 sizes,

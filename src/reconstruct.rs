@@ -58,6 +58,8 @@ pub enum ReconstructError {
     /// A tile with no surfels or no view that sees them (skipped by the tiled run).
     #[error("the tile has no surfels or no training view sees them")]
     EmptyTile,
+    #[error("a tile checkpoint was refused: {0}")]
+    Checkpoint(String),
     #[error("tile {tile}: {source}")]
     Tile {
         tile: String,
@@ -102,7 +104,7 @@ impl ReconstructError {
     pub fn is_input(&self) -> bool {
         match self {
             Self::Prepare(_) | Self::Bundle(_) | Self::NoViews | Self::EmptyTile => true,
-            Self::MapTooLarge { .. } => true,
+            Self::MapTooLarge { .. } | Self::Checkpoint(_) => true,
             Self::Gpu(_) | Self::Train(_) => false,
             Self::Tile { source, .. } => source.is_input(),
         }
@@ -551,6 +553,14 @@ pub struct HoldoutSums {
 }
 
 impl HoldoutSums {
+    /// Adds another session's sums (a frame held out in two tiles counts once).
+    pub fn merge(&mut self, o: &HoldoutSums) {
+        self.se += o.se;
+        self.se_ipm += o.se_ipm;
+        self.n += o.n;
+        self.frames.extend(o.frames.iter().copied());
+    }
+
     pub fn holdout(&self, views: usize) -> Option<Holdout> {
         if self.n == 0 {
             return None;

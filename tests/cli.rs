@@ -108,3 +108,79 @@ fn a_map_too_large_for_its_settings_is_bad_input_not_a_crash() {
     std::fs::remove_file(zip).ok();
     std::fs::remove_dir_all(out).ok();
 }
+
+#[test]
+fn a_run_that_failed_at_a_tile_resumes_with_the_finished_tiles() {
+    let (m, files) = rogs::bundle::example::tiny();
+    let zip = temp("resume.zip");
+    std::fs::write(&zip, rogs::bundle::write_zip(&m, &files).expect("zip")).expect("write");
+    let out = temp("resume-out");
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "reconstruct",
+            zip.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--resolution",
+            "0.1",
+            "--half-width",
+            "3",
+            "--tile-m",
+            "2",
+            "--tile-overlap-m",
+            "0.5",
+        ];
+        args.extend_from_slice(extra);
+        rogs(&args)
+    };
+    let tiles = out.join("tiles");
+    let checkpoints = || {
+        std::fs::read_dir(&tiles)
+            .map(|d| d.filter_map(|e| e.ok()).count())
+            .unwrap_or(0)
+    };
+    // The second tile fails: exit 4, the first tile's checkpoint is on disk and the
+    // message says how to go on.
+    let o = run(&["--fault-tile", "1"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(4), "{err}");
+    assert!(
+        err.contains("--resume") && err.contains("device was lost"),
+        "{err}"
+    );
+    let kept = checkpoints();
+    assert!(kept >= 1, "no checkpoint in {}: {err}", tiles.display());
+    // Other settings: the checkpoint is refused by name, as bad input.
+    let o = run(&["--resume", "--seed", "3"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(3), "{err}");
+    assert!(
+        err.contains(".tile") && err.contains("delete the file"),
+        "{err}"
+    );
+    // The same command with --resume restores it, trains the rest, and cleans up.
+    let o = run(&["--resume"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{err}");
+    assert!(
+        err.contains(&format!("resumed: {kept} finished tiles")),
+        "{err}"
+    );
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).expect("report"))
+            .expect("json");
+    let restored = report["tiles"]
+        .as_array()
+        .expect("tiles")
+        .iter()
+        .filter(|t| t["restored"] == true)
+        .count();
+    assert_eq!(restored, kept, "{}", report["tiles"]);
+    assert!(report["stopped"].is_null(), "{}", report["stopped"]);
+    assert!(
+        !tiles.exists(),
+        "checkpoints are removed once the map is written"
+    );
+    std::fs::remove_file(zip).ok();
+    std::fs::remove_dir_all(out).ok();
+}

@@ -368,3 +368,119 @@ fn a_map_too_large_for_memory_is_refused_with_advice_before_it_is_allocated() {
         "{e}"
     );
 }
+
+#[test]
+fn a_failed_tile_keeps_the_finished_ones_and_the_run_resumes_from_checkpoints() {
+    let (m, files) = demo();
+    let t = TileConfig {
+        size_m: 12.0,
+        overlap_m: 4.0,
+    };
+    // Run A: tile 2 fails (a lost device, injected); tiles 0 and 1 are kept and
+    // checkpointed. Then A retries the failed tile and finishes: the reference map.
+    let mut b = bundle(&m, &files);
+    let mut a = pollster::block_on(TiledRun::new(&mut b, cfg(), Some(t), ctx())).expect("run");
+    a.checkpoints = true;
+    a.fault_tile = Some(2);
+    let mut saved = Vec::new();
+    let err = loop {
+        match pollster::block_on(a.step(&b)) {
+            Ok(Some(_)) => saved.extend(a.take_checkpoint()),
+            Ok(None) => panic!("the injected fault never came"),
+            // The step that fails may have finished the tile before (as the CLI
+            // does, take its checkpoint on errors too).
+            Err(e) => {
+                saved.extend(a.take_checkpoint());
+                break e;
+            }
+        }
+    };
+    let name = a.tiles[2].name();
+    assert!(err.to_string().contains(&format!("tile {name}")), "{err}");
+    assert!(
+        !err.is_input(),
+        "a lost device is the machine's failure: {err}"
+    );
+    assert_eq!(a.tiles_done(), 2, "{:?}", a.reports);
+    assert_eq!(saved.len(), 2, "one checkpoint per finished tile");
+    assert!(saved[0].0.ends_with(".tile"));
+    // Nothing more runs until the failure is cleared.
+    assert!(pollster::block_on(a.step(&b)).expect("stopped").is_none());
+    assert!(a.retry());
+    while pollster::block_on(a.step(&b)).expect("step").is_some() {}
+    let whole = pollster::block_on(a.finish(&b, &mut |_, _| {})).expect("finish");
+    assert_eq!(a.tiles_done(), a.tiles.len());
+
+    // Run B: a new process restores the two checkpoints and trains the rest only.
+    let mut b2 = bundle(&m, &files);
+    let mut r = pollster::block_on(TiledRun::new(&mut b2, cfg(), Some(t), ctx())).expect("run");
+    let planned = r.total_steps();
+    for (_, bytes) in &saved {
+        r.restore(bytes).expect("restore");
+    }
+    assert!(
+        r.total_steps() < planned,
+        "restored tiles are not planned again"
+    );
+    // The same checkpoint twice is refused.
+    let twice = r.restore(&saved[0].1).expect_err("restored twice");
+    assert!(twice.to_string().contains("twice"), "{twice}");
+    let mut steps = 0;
+    while pollster::block_on(r.step(&b2)).expect("step").is_some() {
+        steps += 1;
+    }
+    assert_eq!(steps, r.steps_done());
+    let resumed = pollster::block_on(r.finish(&b2, &mut |_, _| {})).expect("finish");
+    let restored: Vec<_> = r
+        .reports
+        .iter()
+        .filter(|t| t.restored)
+        .map(|t| &t.name)
+        .collect();
+    assert_eq!(restored.len(), 2, "{:?}", r.reports);
+    let trained_a: usize = a.reports.iter().map(|t| t.steps).sum();
+    let trained_b: usize = r
+        .reports
+        .iter()
+        .filter(|t| !t.restored)
+        .map(|t| t.steps)
+        .sum();
+    assert!(
+        trained_b < trained_a,
+        "B trained {trained_b} steps, A {trained_a}"
+    );
+    assert_eq!(resumed.params.len(), whole.params.len());
+
+    // The resumed map is the uninterrupted one (tiles are independent jobs).
+    let (cov, dz, psnr, cls) = agreement(&whole, &resumed);
+    eprintln!("resumed vs retried: coverage {cov:.5}, |dz| {dz:.5} m, PSNR {psnr:.2} dB, classes {cls:.5}");
+    assert!(cov > 0.999, "coverage IoU {cov}");
+    assert!(dz < 0.001, "mean elevation difference {dz} m");
+    assert!(psnr > 45.0, "colour PSNR {psnr} dB");
+    assert!(cls > 0.995, "class agreement {cls}");
+    let (mw, mr) = (whole.metrics.unwrap(), resumed.metrics.unwrap());
+    assert!((mw.psnr_db.unwrap() - mr.psnr_db.unwrap()).abs() < 0.05);
+
+    // A checkpoint of other settings, a damaged one, and one of an untiled run.
+    let mut other = cfg();
+    other.train.seed = 7;
+    let mut b3 = bundle(&m, &files);
+    let mut o = pollster::block_on(TiledRun::new(&mut b3, other, Some(t), ctx())).expect("run");
+    let e = o.restore(&saved[0].1).expect_err("other settings");
+    assert!(
+        e.is_input() && e.to_string().contains("other bundles or settings"),
+        "{e}"
+    );
+    let mut cut = saved[1].1.clone();
+    cut.truncate(cut.len() / 2);
+    let e = o.restore(&cut).expect_err("damaged");
+    assert!(e.to_string().contains("not a tile checkpoint"), "{e}");
+    let mut swapped = rogs::tiles::checkpoint::decode(&saved[1].1)
+        .expect("decode")
+        .0;
+    swapped.index = 0;
+    let forged = rogs::tiles::checkpoint::encode(&swapped, o.fingerprint).expect("encode");
+    let e = o.restore(&forged).expect_err("wrong tile");
+    assert!(e.to_string().contains("names tile"), "{e}");
+    assert_eq!(o.tiles_done(), 0, "a refused checkpoint changes nothing");
+}

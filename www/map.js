@@ -35,7 +35,14 @@ function settings() {
     half_width: Number($('set-half-width').value) || 4,
     ply_up: $('set-ply-up').value,
     ...(Number($('set-tile').value) > 0 ? { tile_m: Number($('set-tile').value) } : {}),
+    ...faultTile(),
   };
+}
+
+// Fault injection for tests: `?fault_tile=N` makes tile N fail once as a lost device would.
+function faultTile() {
+  const v = new URLSearchParams(location.search).get('fault_tile');
+  return v !== null && /^\d+$/.test(v) ? { fault_tile: Number(v) } : {};
 }
 
 function fmtTime(s) {
@@ -90,12 +97,22 @@ async function optimise(setStatus) {
   let previewGap = 2000; // the first preview after 2 s, then every 4 s or 5× its cost
   resetViewer(rec);
   let error = null;
+  const retried = new Set();
   while (!run.stopped) {
     if (run.paused) { await new Promise((r) => setTimeout(r, 100)); continue; }
     let loss;
     try {
       loss = await rec.step();
     } catch (e) {
+      // A tile the machine failed (a lost device) is trained again once; the
+      // finished tiles are kept either way.
+      const tile = rec.tile();
+      if (!retried.has(tile) && rec.retry()) {
+        retried.add(tile);
+        document.body.dataset.retries = String(retried.size);
+        setStatus(`Tile ${tile + 1} failed (${e}); training it again…`, 'info');
+        continue;
+      }
       error = e;
       break;
     }

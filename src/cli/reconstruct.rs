@@ -107,6 +107,15 @@ pub struct Args {
     /// (x east, y north, z up); y rotates them for splat viewers that expect y up.
     #[arg(long, default_value = "z")]
     ply_up: crate::export::ply::Up,
+    /// Go on from where an earlier run into the same --out stopped: the tiles it
+    /// finished (checkpoints in OUT/tiles/) are kept, the rest are trained. Needs the
+    /// same bundles and options; a checkpoint of other settings is refused by name.
+    #[arg(long)]
+    resume: bool,
+    /// Fault injection for tests: the tile of this plan index (0-based) fails at its
+    /// first step as a lost device would.
+    #[arg(long, hide = true)]
+    fault_tile: Option<usize>,
 }
 
 /// The corridor half-width when neither the command nor the bundle gives one.
@@ -192,6 +201,25 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
         }
         Err(e) => return Err(e.to_string()),
     };
+    run.fault_tile = a.fault_tile;
+    let tiles_dir = a.out.join("tiles");
+    if run.tiling.is_some() {
+        run.checkpoints = true;
+        if a.resume {
+            match resume(&mut run, &tiles_dir) {
+                Ok(n) => eprintln!(
+                    "resumed: {n} finished tiles restored from {}",
+                    tiles_dir.display()
+                ),
+                Err(e) => {
+                    eprintln!("cannot resume: {e}");
+                    return Ok(ExitCode::from(EXIT_INVALID_INPUT));
+                }
+            }
+        }
+    } else if a.resume {
+        eprintln!("nothing to resume: this run is not tiled (only tiled runs keep checkpoints; see --tile-m)");
+    }
     match &run.tiling {
         Some(t) => eprintln!(
             "{} tiles of {} m (overlap {} m), {} steps planned, {} drive(s)",
@@ -218,6 +246,7 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
     loop {
         match pollster::block_on(run.step(&b)) {
             Ok(Some(l)) => {
+                write_checkpoint(&mut run, &tiles_dir)?;
                 let tile = match run.current_tile() {
                     Some((k, name)) => format!("tile {}/{} {name}, ", k + 1, run.tile_count()),
                     None => String::new(),
@@ -225,9 +254,20 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
                 bar.set_message(&format!("{tile}loss {:.4}", l.total()));
                 bar.update(run.steps_done(), run.total_steps());
             }
-            Ok(None) => break,
+            Ok(None) => {
+                write_checkpoint(&mut run, &tiles_dir)?;
+                break;
+            }
             Err(e) => {
+                write_checkpoint(&mut run, &tiles_dir)?;
                 eprintln!("\nerror: {e}");
+                if run.tiling.is_some() {
+                    eprintln!(
+                        "{} finished tiles are kept in {}: run the same command with --resume to go on",
+                        run.tiles_done(),
+                        tiles_dir.display()
+                    );
+                }
                 stopped = Some(e.to_string());
                 break;
             }
@@ -268,11 +308,50 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
         model.len() + files.len(),
         a.out.display()
     );
+    if stopped.is_none() && tiles_dir.is_dir() {
+        // The map is written: its tiles' checkpoints are no longer needed.
+        let _ = std::fs::remove_dir_all(&tiles_dir);
+    }
     Ok(if stopped.is_some() {
         ExitCode::from(EXIT_MACHINE)
     } else {
         ExitCode::SUCCESS
     })
+}
+
+/// Writes the checkpoint of the tile just finished, if any (`name.tile.part`, then
+/// renamed: a run killed while writing leaves no half checkpoint).
+fn write_checkpoint(run: &mut TiledRun, dir: &std::path::Path) -> Result<(), String> {
+    let Some((name, bytes)) = run.take_checkpoint() else {
+        return Ok(());
+    };
+    std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+    let part = dir.join(format!("{name}.part"));
+    std::fs::write(&part, &bytes).map_err(|e| format!("cannot write {}: {e}", part.display()))?;
+    let to = dir.join(&name);
+    std::fs::rename(&part, &to).map_err(|e| format!("cannot write {}: {e}", to.display()))
+}
+
+/// Restores every checkpoint in `dir`; the count, or which file was refused and why.
+fn resume(run: &mut TiledRun, dir: &std::path::Path) -> Result<usize, String> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Ok(0);
+    };
+    let mut paths: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "tile"))
+        .collect();
+    paths.sort();
+    for p in &paths {
+        let bytes = std::fs::read(p).map_err(|e| format!("cannot read {}: {e}", p.display()))?;
+        run.restore(&bytes).map_err(|e| {
+            format!(
+                "{}: {e} (delete the file to train its tile again)",
+                p.display()
+            )
+        })?;
+    }
+    Ok(paths.len())
 }
 
 fn positive_m64(s: &str) -> Result<f64, String> {

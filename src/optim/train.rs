@@ -54,7 +54,7 @@ pub enum TrainError {
 }
 
 /// Loss terms of one step (weighted), as the GPU summed them.
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StepLoss {
     pub rgb: f64,
     pub ce: f64,

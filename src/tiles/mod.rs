@@ -22,6 +22,7 @@
 //! that see it); a view that sees two tiles trains both. Tiles are independent jobs:
 //! the GPU working set is bounded by the largest tile, and a tile can be run apart.
 
+pub mod checkpoint;
 mod files;
 pub mod tile;
 
@@ -33,7 +34,7 @@ pub use tile::Tile;
 use crate::bev::BevGeometry;
 use crate::bundle::{Bundle, Manifest};
 use crate::eval::BevRaster;
-use crate::gpu::GpuContext;
+use crate::gpu::{GpuContext, GpuError};
 use crate::grid::{dist2_segment, Rect};
 use crate::init::align::AlignSummary;
 use crate::init::PosePlanes;
@@ -44,6 +45,7 @@ use crate::reconstruct::{
 };
 use crate::render::from_bundle::view_camera;
 use crate::render::Params;
+use checkpoint::Finished;
 use serde::Serialize;
 use web_time::Instant;
 
@@ -365,7 +367,7 @@ impl Stitcher {
 }
 
 /// What one tile did (report.json's `tiles`).
-#[derive(Clone, Debug, Default, Serialize)]
+#[derive(Clone, Debug, Default, Serialize, serde::Deserialize)]
 pub struct TileReport {
     pub name: String,
     pub core: Option<Rect>,
@@ -387,6 +389,9 @@ pub struct TileReport {
     pub peak_gpu_bytes: Option<u64>,
     /// Why the tile was skipped (no surfels or no view) or stopped.
     pub stopped: Option<String>,
+    /// Restored from a checkpoint of an earlier run (`--resume`), not trained here.
+    #[serde(default)]
+    pub restored: bool,
 }
 
 /// A reconstruction over tiles, stepped like a `Session` (one tile, the whole map,
@@ -421,6 +426,18 @@ pub struct TiledRun {
     /// The first tile that failed, and why (the run stops there; the finished
     /// tiles are kept).
     pub failed: Option<String>,
+    /// The plan index of the tile that failed (`retry` trains it again).
+    failed_index: Option<usize>,
+    /// Per planned tile: finished (trained or restored).
+    done: Vec<bool>,
+    /// Encode a checkpoint of every tile as it finishes (`take_checkpoint`).
+    pub checkpoints: bool,
+    pending: Option<(String, Vec<u8>)>,
+    /// Hash of the manifest, the settings and the plan: checkpoints carry it.
+    pub fingerprint: u64,
+    /// Fault injection for tests of failure and resume: the tile of this plan index
+    /// fails at its first step as a lost device would (`rogs reconstruct --fault-tile`).
+    pub fault_tile: Option<usize>,
 }
 
 impl TiledRun {
@@ -485,6 +502,12 @@ impl TiledRun {
             planned_steps: 0,
             peak_gpu_bytes: None,
             failed: None,
+            failed_index: None,
+            done: Vec::new(),
+            checkpoints: false,
+            pending: None,
+            fingerprint: 0,
+            fault_tile: None,
             cfg,
         };
         match tiling {
@@ -528,6 +551,17 @@ impl TiledRun {
             });
         }
         run.stitch = Stitcher::new(run.geometry, channels, min_alpha);
+        run.done = vec![false; run.tiles.len()];
+        let plan: Vec<_> = run
+            .tiles
+            .iter()
+            .map(|t| (t.name(), t.views.clone()))
+            .collect();
+        run.fingerprint = checkpoint::fnv1a(&[
+            &serde_json::to_vec(&b.manifest).unwrap_or_default(),
+            format!("{:?}", run.cfg).as_bytes(),
+            format!("{:?} {:?} {plan:?}", run.tiling, run.geometry).as_bytes(),
+        ]);
         Ok(run)
     }
 
@@ -572,6 +606,13 @@ impl TiledRun {
                 }
                 continue;
             }
+            if self.fault_tile.is_some() && self.fault_tile == self.started.checked_sub(1) {
+                self.fault_tile = None;
+                let e = GpuError::Failed(
+                    "the device was lost (a fault injected by --fault-tile)".into(),
+                );
+                return Err(self.fail(e.into()));
+            }
             let Some(s) = self.session.as_mut() else {
                 return Ok(None);
             };
@@ -599,7 +640,9 @@ impl TiledRun {
 
     fn fail(&mut self, e: ReconstructError) -> ReconstructError {
         match self.current_tile() {
-            Some((_, name)) => {
+            Some((k, name)) => {
+                // Bad input fails again the same way: only the machine's failures retry.
+                self.failed_index = (!e.is_input()).then_some(k);
                 let msg = format!(
                     "tile {name} failed: {e}; the {} tiles finished before it are kept",
                     self.reports.iter().filter(|r| r.stopped.is_none()).count()
@@ -622,6 +665,9 @@ impl TiledRun {
         while self.started < self.tiles.len() {
             let tile = self.tiles[self.started].clone();
             self.started += 1;
+            if self.done.get(self.started - 1).copied().unwrap_or(false) {
+                continue;
+            }
             self.session = None;
             self.recorded = false;
             match Session::build(b, self.cfg.clone(), self.ctx.clone(), Some(&tile)).await {
@@ -661,15 +707,13 @@ impl TiledRun {
 
     /// Renders the current tile's layers into the map and keeps its core surfels.
     async fn record(&mut self, b: &Bundle) -> Result<(), ReconstructError> {
+        let index = self.started.checked_sub(1);
+        let window = self.window_of(index);
+        let tile = index.and_then(|k| self.tiles.get(k)).cloned();
         let Some(s) = self.session.as_mut() else {
             return Ok(());
         };
         let t0 = Instant::now();
-        let tile = self
-            .started
-            .checked_sub(1)
-            .and_then(|k| self.tiles.get(k))
-            .cloned();
         let p = s.model().await?;
         // The model first: a failure in the BEV below must not lose it.
         let keep: Vec<usize> = (0..p.len())
@@ -682,41 +726,34 @@ impl TiledRun {
             })
             .collect();
         let shift = [0, 1, 2].map(|c| (s.origin[c] - self.model_origin[c]) as f32);
-        append(&mut self.model, &p, &keep, shift);
+        let mut done = Finished {
+            index: index.unwrap_or(0),
+            model: Params {
+                channels: p.channels,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        append(&mut done.model, &p, &keep, shift);
         for &k in &keep {
             let dz = (p.pos[k][2] - s.initial.pos[k][2]) as f64;
-            self.z_change.0 += dz * dz;
+            done.z_change.0 += dz * dz;
         }
-        self.z_change.1 += keep.len();
-        self.centres.extend(
-            keep.iter()
-                .filter(|&&k| p.opacity[k] > UNSEEN_OPACITY_LOGIT + 1.0)
-                .map(|&k| [0, 1, 2].map(|c| p.pos[k][c] as f64 + s.origin[c])),
-        );
-        let (window, blend) = match &tile {
-            Some(t) => (
-                self.stitch.window(&t.rect),
-                Some((t.rect, 2.0 * self.tiling.map_or(0.0, |c| c.overlap_m))),
-            ),
-            None => (
-                Some(Window {
-                    col: 0,
-                    row: 0,
-                    geometry: self.geometry,
-                }),
-                None,
-            ),
-        };
+        done.z_change.1 = keep.len();
+        done.centres = keep
+            .iter()
+            .filter(|&&k| p.opacity[k] > UNSEEN_OPACITY_LOGIT + 1.0)
+            .map(|&k| [0, 1, 2].map(|c| p.pos[k][c] as f64 + s.origin[c]))
+            .collect();
         if let Some(w) = window {
-            let layers = s.layers(&p, &w.geometry, &mut |_, _| {}).await?;
-            self.stitch.add(&w, &layers, blend);
+            done.layers = Some(s.layers(&p, &w.geometry, &mut |_, _| {}).await?);
         }
-        s.holdout_sums(b, &mut self.holdout).await?;
-        self.holdout_views += s.holdout_views.len();
+        s.holdout_sums(b, &mut done.holdout).await?;
+        done.holdout_views = s.holdout_views.len();
         sample_gpu(&self.ctx, &mut self.peak_gpu_bytes);
         let bev_ms = t0.elapsed().as_secs_f64() * 1e3;
         s.timings.bev_ms += bev_ms;
-        self.reports.push(TileReport {
+        done.report = TileReport {
             name: tile.as_ref().map_or("all".into(), |t| t.name()),
             core: tile.as_ref().map(|t| t.core),
             rect: tile.as_ref().map(|t| t.rect),
@@ -735,9 +772,141 @@ impl TiledRun {
             smoothness_edges: s.edges,
             peak_gpu_bytes: self.peak_gpu_bytes,
             stopped: s.stopped.clone(),
-        });
+            restored: false,
+        };
+        if self.checkpoints && tile.is_some() && s.stopped.is_none() {
+            self.pending = Some((
+                format!("{}{}", done.report.name, checkpoint::SUFFIX),
+                checkpoint::encode(&done, self.fingerprint).map_err(GpuError::Failed)?,
+            ));
+        }
+        self.apply(done);
         self.recorded = true;
         Ok(())
+    }
+
+    /// The window of the map that tile `index` renders (the whole map untiled).
+    fn window_of(&self, index: Option<usize>) -> Option<Window> {
+        match index.and_then(|k| self.tiles.get(k)) {
+            Some(t) if self.tiling.is_some() => self.stitch.window(&t.rect),
+            _ => Some(Window {
+                col: 0,
+                row: 0,
+                geometry: self.geometry,
+            }),
+        }
+    }
+
+    /// Adds a finished tile to the map, the model, the metrics and the report.
+    fn apply(&mut self, f: Finished) {
+        let tile = self.tiling.and(self.tiles.get(f.index));
+        if let (Some(l), Some(w)) = (&f.layers, self.window_of(Some(f.index))) {
+            let blend = tile.map(|t| (t.rect, 2.0 * self.tiling.map_or(0.0, |c| c.overlap_m)));
+            self.stitch.add(&w, l, blend);
+        }
+        let shift = [0.0; 3];
+        let all: Vec<usize> = (0..f.model.len()).collect();
+        append(&mut self.model, &f.model, &all, shift);
+        self.z_change.0 += f.z_change.0;
+        self.z_change.1 += f.z_change.1;
+        self.centres.extend_from_slice(&f.centres);
+        self.holdout.merge(&f.holdout);
+        self.holdout_views += f.holdout_views;
+        if let Some(d) = self.done.get_mut(f.index) {
+            *d = true;
+        }
+        self.reports.push(f.report);
+    }
+
+    /// The checkpoint of the tile just finished, once (`checkpoints` on): its file
+    /// name (`x3_y-2.tile`) and bytes. Write it where `restore` will find it.
+    pub fn take_checkpoint(&mut self) -> Option<(String, Vec<u8>)> {
+        self.pending.take()
+    }
+
+    /// Adds a tile finished by an earlier run of the same bundles and settings from
+    /// its checkpoint (before the first step); that tile is not trained again.
+    /// Returns the tile's name. A checkpoint of another run, of a tile not in the
+    /// plan, or a damaged one is refused with what is wrong and changes nothing.
+    pub fn restore(&mut self, bytes: &[u8]) -> Result<String, ReconstructError> {
+        let bad = |problem: String| ReconstructError::Checkpoint(problem);
+        if self.tiling.is_none() {
+            return Err(bad(
+                "this run is not tiled: only tiled runs resume (--tile-m)".into(),
+            ));
+        }
+        if self.started > 0 {
+            return Err(bad(
+                "checkpoints are restored before the run's first step".into()
+            ));
+        }
+        let (mut f, fp) = checkpoint::decode(bytes).map_err(bad)?;
+        if fp != self.fingerprint {
+            return Err(bad(format!(
+                "it was made by a run of other bundles or settings (fingerprint {fp:016x}, this run's is {:016x}); \
+                 run with the same bundles and options, or delete it to train its tile again",
+                self.fingerprint
+            )));
+        }
+        let Some(tile) = self.tiles.get(f.index) else {
+            return Err(bad(format!("tile {} is not in this run's plan", f.index)));
+        };
+        let name = tile.name();
+        if f.report.name != name {
+            return Err(bad(format!(
+                "it names tile {}, the plan's tile {} is {name}",
+                f.report.name, f.index
+            )));
+        }
+        if self.done.get(f.index).copied().unwrap_or(false) {
+            return Err(bad(format!("tile {name} was restored twice")));
+        }
+        let want = self
+            .stitch
+            .window(&tile.rect)
+            .map(|w| (w.geometry.width, w.geometry.height));
+        let got = f.layers.as_ref().map(|l| (l.bev.width, l.bev.height));
+        let channels_ok = f
+            .layers
+            .as_ref()
+            .is_none_or(|l| l.bev.channels == self.model.channels)
+            && (f.model.is_empty() || f.model.channels == self.model.channels);
+        if want != got || !channels_ok {
+            return Err(bad(format!(
+                "tile {name}'s layers are {got:?} px, the map's window for it is {want:?} px"
+            )));
+        }
+        let epochs = if self.cfg.baseline_ipm {
+            0
+        } else {
+            self.cfg.train.epochs
+        };
+        let planned =
+            (tile.views.len() * epochs).min(self.cfg.train.max_steps.unwrap_or(usize::MAX));
+        self.planned_steps = self.planned_steps.saturating_sub(planned);
+        f.report.restored = true;
+        self.apply(f);
+        Ok(name)
+    }
+
+    /// After a tile failed for a reason of the machine (a lost device, not bad
+    /// input): clears the failure so that the next `step` trains that tile again
+    /// from the start (the tiles finished before it are kept). False when there is
+    /// nothing to retry.
+    pub fn retry(&mut self) -> bool {
+        let Some(k) = self.failed_index.take() else {
+            return false;
+        };
+        self.failed = None;
+        self.session = None;
+        self.recorded = false;
+        self.started = k;
+        true
+    }
+
+    /// Tiles finished (trained here or restored from checkpoints).
+    pub fn tiles_done(&self) -> usize {
+        self.done.iter().filter(|&&d| d).count()
     }
 
     /// The model of the tiles finished so far, and its origin.

@@ -30,6 +30,9 @@ struct Settings {
     tile_overlap_m: Option<f64>,
     /// Up axis of the exported PLY files: "z" (world) or "y" (splat viewers).
     ply_up: Option<String>,
+    /// Fault injection for tests (`?fault_tile=N`): the tile of this plan index
+    /// fails at its first step as a lost device would.
+    fault_tile: Option<usize>,
 }
 
 /// A lazily read drive above this size is tiled even when its corridor is small.
@@ -185,6 +188,8 @@ async fn start(
         None => TiledRun::new(&mut bundle, c, tiling, ctx).await,
     }
     .map_err(err)?;
+    let mut run = run;
+    run.fault_tile = s.fault_tile;
     let geometry = run.geometry;
     Ok(Reconstruction {
         bundle,
@@ -233,6 +238,13 @@ impl Reconstruction {
         }
         .map_err(err)?;
         Ok(l.map(|l| l.total()))
+    }
+
+    /// After a step failed at a tile for a reason of the machine (a lost device, not
+    /// bad input): clears it so that the next step trains that tile again, keeping
+    /// the finished ones. False when there is nothing to retry.
+    pub fn retry(&mut self) -> bool {
+        self.run.retry()
     }
 
     /// Renders the layers, scores them and prepares the export files; resolves to the

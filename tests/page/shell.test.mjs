@@ -168,8 +168,9 @@ test('the demo optimises in the page; layers, pan, zoom and exports work; errors
   await page.close();
 });
 
-test('the map is trained tile by tile in the page when a tile size is set', async () => {
-  const { page, errors } = await openPage();
+test('the map is trained tile by tile in the page; a tile the machine fails is trained again', async () => {
+  // ?fault_tile=1: the second tile fails once as a lost device would.
+  const { page, errors } = await openPage('?fault_tile=1');
   await page.click('#demo');
   await page.waitForSelector('#optimise:not([hidden])');
   await page.selectOption('#set-resolution', '0.2');
@@ -178,11 +179,13 @@ test('the map is trained tile by tile in the page when a tile size is set', asyn
   await page.waitForSelector('#viewer:not([hidden]) #exports a', { timeout: 170_000 });
   assert.match(await page.textContent('#status'), /Map ready/);
   assert.ok(Number(await page.getAttribute('body', 'data-tiles')) > 1, 'several tiles');
+  assert.equal(await page.getAttribute('body', 'data-retries'), '1', 'the failed tile was retried once');
   const r = await page.evaluate(async () => {
     const a = [...document.querySelectorAll('#exports a')].find((x) => x.download === 'report.json');
     return (await fetch(a.href)).json();
   });
   assert.equal(r.tiling.size_m, 4);
+  assert.equal(r.stopped, null, 'the retried tile finished');
   assert.ok(r.tile_count > 1, JSON.stringify(r.tiles));
   assert.ok(r.tiles.filter((t) => t.steps > 0).length > 1, 'several tiles trained');
   assert.ok(r.seams.border_pairs > 0);

@@ -19,6 +19,7 @@ pub mod optim;
 pub mod par;
 pub mod reconstruct;
 pub mod render;
+pub mod settings;
 pub mod spatial;
 pub mod synth;
 pub mod tiles;

@@ -35,8 +35,24 @@ function settings() {
     half_width: Number($('set-half-width').value) || 4,
     ply_up: $('set-ply-up').value,
     ...(Number($('set-tile').value) > 0 ? { tile_m: Number($('set-tile').value) } : {}),
+    tile_overlap_m: Number($('set-tile-overlap').value) || 0,
+    traj_loss: $('set-traj').checked,
+    ...($('set-ipm').checked ? { baseline: 'ipm' } : {}),
+    ...(Number($('set-holdout').value) > 0 ? { holdout_every: Number($('set-holdout').value) } : {}),
+    ...optionalNumber('lr_z_start', 'set-lr-z-start'),
+    ...optionalNumber('lr_z_end', 'set-lr-z-end'),
+    ...optionalNumber('lidar_gate', 'set-lidar-gate'),
+    ...optionalNumber('lidar_band', 'set-lidar-band'),
+    ...optionalNumber('max_steps', 'set-max-steps'),
+    seed: Number($('set-seed').value) || 0,
     ...faultTile(),
   };
+}
+
+// An optional setting: absent when its field is empty, so that the engine's default holds.
+function optionalNumber(key, id) {
+  const v = $(id).value.trim();
+  return v === '' ? {} : { [key]: Number(v) };
 }
 
 // Fault injection for tests: `?fault_tile=N` makes tile N fail once as a lost device would.

@@ -7,9 +7,8 @@ use super::progress::Progress;
 use super::{EXIT_INVALID_INPUT, EXIT_MACHINE};
 use crate::bundle::{Bundle, Limits};
 use crate::gpu::GpuContext;
-use crate::init::InitMethod;
-use crate::reconstruct::ReconstructConfig;
-use crate::tiles::{TileConfig, TiledRun, DEFAULT_OVERLAP_M};
+use crate::settings::Settings;
+use crate::tiles::{TiledRun, DEFAULT_OVERLAP_M};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -118,47 +117,36 @@ pub struct Args {
     fault_tile: Option<usize>,
 }
 
-/// The corridor half-width when neither the command nor the bundle gives one.
-const DEFAULT_HALF_WIDTH_M: f64 = 8.0;
-
-fn config(a: &Args, m: &crate::bundle::Manifest) -> ReconstructConfig {
-    let mut c = ReconstructConfig::default();
-    c.prepare.grid.resolution = a.resolution;
-    c.prepare.grid.half_width = a
-        .half_width
-        .or(m.corridor_half_width_m)
-        .unwrap_or(DEFAULT_HALF_WIDTH_M);
-    c.prepare.refine.enabled = !a.no_adaptive;
-    c.prepare.use_lidar = !a.no_lidar;
-    c.prepare.init.method = match a.init {
-        Init::Nearest => InitMethod::Nearest,
-        Init::Consensus => InitMethod::Consensus,
-    };
-    c.train.epochs = a.epochs;
-    c.train.seed = a.seed;
-    c.train.max_steps = a.max_steps;
-    c.train.use_lidar = !a.no_lidar;
-    c.train.holdout_every = a.holdout_every.filter(|&k| k > 0);
-    if a.no_traj_loss {
-        c.train.loss.traj = 0.0;
+/// The run's settings, as the page would send them.
+fn settings(a: &Args) -> Settings {
+    Settings {
+        resolution: Some(a.resolution),
+        half_width: a.half_width,
+        epochs: Some(a.epochs),
+        lidar: Some(!a.no_lidar),
+        align: Some(!a.no_pose_align),
+        adaptive: Some(!a.no_adaptive),
+        init: Some(
+            match a.init {
+                Init::Nearest => "nearest",
+                Init::Consensus => "consensus",
+            }
+            .into(),
+        ),
+        traj_loss: Some(!a.no_traj_loss),
+        holdout_every: a.holdout_every,
+        baseline: a.baseline.map(|_| "ipm".into()),
+        lr_z_start: a.lr_z_start,
+        lr_z_end: a.lr_z_end,
+        lidar_gate: a.lidar_gate,
+        lidar_band: a.lidar_band,
+        max_steps: a.max_steps,
+        seed: Some(a.seed),
+        tile_m: a.tile_m,
+        tile_overlap_m: Some(a.tile_overlap_m),
+        ply_up: None,
+        fault_tile: a.fault_tile,
     }
-    c.baseline_ipm = a.baseline.is_some();
-    if let Some(v) = a.lidar_gate {
-        c.train.loss.lidar_gate_m = v;
-    }
-    if let Some(v) = a.lidar_band {
-        c.train.loss.lidar_band_m = v;
-    }
-    if a.no_pose_align {
-        c.align = None;
-    }
-    if let Some(v) = a.lr_z_start {
-        c.train.lr.z_start = v;
-    }
-    if let Some(v) = a.lr_z_end {
-        c.train.lr.z_end = v;
-    }
-    c
 }
 
 pub fn run(a: Args) -> Result<ExitCode, String> {
@@ -185,11 +173,17 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
     };
     std::fs::create_dir_all(&a.out)
         .map_err(|e| format!("cannot create {}: {e}", a.out.display()))?;
-    let cfg = config(&a, &b.manifest);
-    let asked = a.tile_m.map(|size_m| TileConfig {
-        size_m,
-        overlap_m: a.tile_overlap_m,
-    });
+    let s = settings(&a);
+    let (cfg, asked) = match s
+        .config(&b.manifest, crate::settings::CLI)
+        .and_then(|c| Ok((c, s.tiling()?)))
+    {
+        Ok(v) => v,
+        Err(e) => {
+            eprintln!("invalid settings: {e}");
+            return Ok(ExitCode::from(EXIT_INVALID_INPUT));
+        }
+    };
     let tiling = crate::tiles::choose(&b.manifest, &cfg, asked);
     let ctx = GpuContext::new_blocking().map_err(|e| e.to_string())?;
     eprintln!("preparing surfels…");
@@ -201,7 +195,7 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
         }
         Err(e) => return Err(e.to_string()),
     };
-    run.fault_tile = a.fault_tile;
+    run.fault_tile = s.fault_tile;
     let tiles_dir = a.out.join("tiles");
     if run.tiling.is_some() {
         run.checkpoints = true;

@@ -5,34 +5,13 @@
 use crate::bev::BevGeometry;
 use crate::bundle::{Bundle, LazyFiles, Limits};
 use crate::gpu::GpuContext;
-use crate::reconstruct::{Outcome, ReconstructConfig, Session};
-use crate::tiles::{TileConfig, TiledRun, DEFAULT_OVERLAP_M};
-use serde::Deserialize;
+use crate::reconstruct::{Outcome, Session};
+use crate::settings::{self, Settings};
+use crate::tiles::{TileConfig, TiledRun};
 use wasm_bindgen::prelude::*;
 
 fn err(e: impl std::fmt::Display) -> JsValue {
     JsValue::from_str(&e.to_string())
-}
-
-/// Settings from the page (every field optional).
-#[derive(Deserialize, Default)]
-#[serde(default)]
-struct Settings {
-    resolution: Option<f64>,
-    half_width: Option<f64>,
-    epochs: Option<usize>,
-    lidar: Option<bool>,
-    align: Option<bool>,
-    adaptive: Option<bool>,
-    init: Option<String>,
-    /// Tile side in metres (none: untiled unless the drive is large).
-    tile_m: Option<f64>,
-    tile_overlap_m: Option<f64>,
-    /// Up axis of the exported PLY files: "z" (world) or "y" (splat viewers).
-    ply_up: Option<String>,
-    /// Fault injection for tests (`?fault_tile=N`): the tile of this plan index
-    /// fails at its first step as a lost device would.
-    fault_tile: Option<usize>,
 }
 
 /// A lazily read drive above this size is tiled even when its corridor is small.
@@ -134,42 +113,13 @@ async fn start(
     let s: Settings = if settings.is_undefined() || settings.is_null() {
         Settings::default()
     } else {
-        serde_wasm_bindgen::from_value(settings).map_err(err)?
+        serde_wasm_bindgen::from_value(settings).map_err(|e| err(format!("settings: {e}")))?
     };
-    let ply_up = match s.ply_up.as_deref() {
-        None => crate::export::ply::Up::Z,
-        Some(u) => u.parse().map_err(err)?,
-    };
-    let mut c = ReconstructConfig::default();
+    let ply_up = s.ply_up().map_err(err)?;
     // The page defaults coarser than the paper's 5 cm so that the demo runs in a
     // minute or two on a CPU; the settings panel says so.
-    c.prepare.grid.resolution = s.resolution.unwrap_or(0.1);
-    c.prepare.grid.half_width = s.half_width.unwrap_or(4.0);
-    c.train.epochs = s.epochs.unwrap_or(1);
-    c.train.use_lidar = s.lidar.unwrap_or(true);
-    c.prepare.use_lidar = c.train.use_lidar;
-    if s.align == Some(false) {
-        c.align = None;
-    }
-    c.prepare.refine.enabled = s.adaptive.unwrap_or(true);
-    if s.init.as_deref() == Some("nearest") {
-        c.prepare.init.method = crate::init::InitMethod::Nearest;
-    }
-    let asked = match s.tile_m {
-        Some(size_m) if size_m.is_finite() && size_m > 0.0 => Some(TileConfig {
-            size_m,
-            overlap_m: s
-                .tile_overlap_m
-                .filter(|o| o.is_finite() && *o >= 0.0)
-                .unwrap_or(DEFAULT_OVERLAP_M),
-        }),
-        Some(v) => {
-            return Err(err(format!(
-                "tile size {v} m: expected a positive number of metres, such as 64"
-            )))
-        }
-        None => None,
-    };
+    let c = s.config(&bundle.manifest, settings::PAGE).map_err(err)?;
+    let asked = s.tiling().map_err(err)?;
     let mut tiling = crate::tiles::choose(&bundle.manifest, &c, asked);
     if let (Some((files, _)), None) = (&lazy, tiling) {
         // Untiled, a run reads every file at once: a large drive read lazily is

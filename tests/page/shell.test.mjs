@@ -195,6 +195,47 @@ test('the map is trained tile by tile in the page; a tile the machine fails is t
   await page.close();
 });
 
+test('every setting of rogs reconstruct is in the page and reaches the run; a bad one is refused in words', async () => {
+  const { page, errors } = await openPage();
+  await page.click('#demo');
+  await page.waitForSelector('#optimise:not([hidden])');
+  await page.selectOption('#set-resolution', '0.2');
+  // The advanced settings open and are reached by keyboard.
+  await page.focus('#advanced summary');
+  await page.keyboard.press('Enter');
+  assert.equal(await page.getAttribute('#advanced', 'open'), '');
+  await page.fill('#set-lr-z-start', '0');
+  await page.click('#run');
+  await page.waitForFunction(() => /Could not start: lr_z_start 0: expected a positive number/.test(document.getElementById('status').textContent));
+  assert.equal(await page.isDisabled('#run'), false, 'the page stays usable');
+  await page.fill('#set-lr-z-start', '0.002');
+  await page.fill('#set-lr-z-end', '0.00002');
+  await page.fill('#set-lidar-gate', '0.7');
+  await page.fill('#set-lidar-band', '0.3');
+  await page.fill('#set-max-steps', '12');
+  await page.fill('#set-seed', '5');
+  await page.fill('#set-holdout', '4');
+  await page.uncheck('#set-traj');
+  await page.click('#run');
+  await page.waitForSelector('#viewer:not([hidden]) #exports a', { timeout: 170_000 });
+  assert.match(await page.textContent('#status'), /Map ready/);
+  const r = await page.evaluate(async () => {
+    const a = [...document.querySelectorAll('#exports a')].find((x) => x.download === 'report.json');
+    return (await fetch(a.href)).json();
+  });
+  const t = r.settings.train;
+  assert.ok(r.steps > 0 && r.steps <= 12, String(r.steps));
+  assert.equal(t.max_steps, 12);
+  assert.equal(t.seed, 5);
+  assert.equal(t.holdout_every, 4);
+  assert.ok(r.holdout_views > 0, 'frames were held out');
+  assert.equal(t.loss.traj, 0);
+  assert.ok(Math.abs(t.loss.lidar_gate_m - 0.7) < 1e-6 && Math.abs(t.loss.lidar_band_m - 0.3) < 1e-6, JSON.stringify(t.loss));
+  assert.ok(Math.abs(t.lr.z_start - 0.002) < 1e-9 && Math.abs(t.lr.z_end - 0.00002) < 1e-9, JSON.stringify(t.lr));
+  assert.deepEqual(errors, []);
+  await page.close();
+});
+
 test('a bundle read lazily (?lazy=1) trains tile by tile holding one tile\'s files', async () => {
   const { page, errors } = await openPage('?lazy=1');
   await drop(page, 'demo.zip');

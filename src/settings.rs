@@ -1,0 +1,228 @@
+//! The settings a person chooses for a run, one home for the CLI's flags and the
+//! page's settings panel: every field is optional (absent: the default), `config`
+//! turns them into the engine's `ReconstructConfig` and refuses a value out of range
+//! by name, and `tiling` into the tile plan asked for. The CLI and the page differ
+//! only in their defaults for the grid (`Defaults`).
+
+use crate::bundle::Manifest;
+use crate::init::InitMethod;
+use crate::reconstruct::ReconstructConfig;
+use crate::tiles::{TileConfig, DEFAULT_OVERLAP_M};
+use serde::Deserialize;
+
+/// Every setting that changes the map (the page sends them as one object).
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Settings {
+    /// Grid spacing, metres.
+    pub resolution: Option<f64>,
+    /// Corridor half-width, metres (absent: the bundle's, else the default's).
+    pub half_width: Option<f64>,
+    pub epochs: Option<usize>,
+    /// Use the bundle's LiDAR (elevation loss and refinement cue); default true.
+    pub lidar: Option<bool>,
+    /// Align the poses to the LiDAR; default true.
+    pub align: Option<bool>,
+    /// Road-structure-aware refinement; default true.
+    pub adaptive: Option<bool>,
+    /// "consensus" (default) or "nearest".
+    pub init: Option<String>,
+    /// The trajectory-prior loss L_traj; default true.
+    pub traj_loss: Option<bool>,
+    /// Hold out every K-th frame and report road PSNR on them.
+    pub holdout_every: Option<usize>,
+    /// "ipm": write the IPM baseline instead of optimising.
+    pub baseline: Option<String>,
+    /// z learning rate at the start and the end, as ratios of the scene extent.
+    pub lr_z_start: Option<f32>,
+    pub lr_z_end: Option<f32>,
+    /// LiDAR gate and band of the elevation loss, metres.
+    pub lidar_gate: Option<f32>,
+    pub lidar_band: Option<f32>,
+    /// Stop after this many steps.
+    pub max_steps: Option<usize>,
+    /// Seed of the training image order.
+    pub seed: Option<u64>,
+    /// Tile side, metres (absent or 0: untiled unless the drive is large).
+    pub tile_m: Option<f64>,
+    /// Overlap of each tile beyond its square, metres.
+    pub tile_overlap_m: Option<f64>,
+    /// Up axis of the exported PLY files: "z" (world) or "y" (splat viewers).
+    pub ply_up: Option<String>,
+    /// Fault injection for tests: the tile of this plan index fails at its first
+    /// step as a lost device would.
+    pub fault_tile: Option<usize>,
+}
+
+/// What a front end uses where a setting is absent.
+#[derive(Clone, Copy, Debug)]
+pub struct Defaults {
+    pub resolution: f64,
+    /// When the bundle gives no `corridor_half_width_m` either.
+    pub half_width: f64,
+}
+
+/// The CLI's: the paper's 5 cm grid.
+pub const CLI: Defaults = Defaults {
+    resolution: 0.05,
+    half_width: 8.0,
+};
+/// The page's: 10 cm, so that the demo runs in a minute or two on a CPU.
+pub const PAGE: Defaults = Defaults {
+    resolution: 0.1,
+    half_width: 4.0,
+};
+
+fn positive<T: PartialOrd + Default + Copy + std::fmt::Display>(
+    name: &str,
+    v: Option<T>,
+    example: &str,
+) -> Result<Option<T>, String> {
+    match v {
+        Some(x) if x.partial_cmp(&T::default()) != Some(std::cmp::Ordering::Greater) => Err(
+            format!("{name} {x}: expected a positive number, such as {example}"),
+        ),
+        _ => Ok(v),
+    }
+}
+
+impl Settings {
+    /// The engine's configuration for a run on the bundle of manifest `m`.
+    pub fn config(&self, m: &Manifest, d: Defaults) -> Result<ReconstructConfig, String> {
+        let mut c = ReconstructConfig::default();
+        let res = positive("resolution", self.resolution, "0.05 (metres)")?;
+        let hw = positive("half_width", self.half_width, "8 (metres)")?;
+        if res.is_some_and(|r| !r.is_finite()) || hw.is_some_and(|h| !h.is_finite()) {
+            return Err("resolution and half_width must be finite numbers of metres".into());
+        }
+        c.prepare.grid.resolution = res.unwrap_or(d.resolution);
+        c.prepare.grid.half_width = hw.or(m.corridor_half_width_m).unwrap_or(d.half_width);
+        c.prepare.refine.enabled = self.adaptive.unwrap_or(true);
+        let lidar = self.lidar.unwrap_or(true);
+        c.prepare.use_lidar = lidar;
+        c.train.use_lidar = lidar;
+        c.prepare.init.method = match self.init.as_deref() {
+            None | Some("consensus") => InitMethod::Consensus,
+            Some("nearest") => InitMethod::Nearest,
+            Some(o) => return Err(format!("init {o:?}: expected \"consensus\" or \"nearest\"")),
+        };
+        if let Some(e) = self.epochs {
+            if e == 0 {
+                return Err("epochs 0: expected 1 or more passes over the images".into());
+            }
+            c.train.epochs = e;
+        }
+        if let Some(s) = self.seed {
+            c.train.seed = s;
+        }
+        c.train.max_steps = positive("max_steps", self.max_steps, "100")?;
+        c.train.holdout_every = self.holdout_every.filter(|&k| k > 0);
+        if self.traj_loss == Some(false) {
+            c.train.loss.traj = 0.0;
+        }
+        c.baseline_ipm = match self.baseline.as_deref() {
+            None => false,
+            Some("ipm") => true,
+            Some(o) => return Err(format!("baseline {o:?}: expected \"ipm\"")),
+        };
+        let finite = |name: &str, v: Option<f32>, ex: &str| match positive(name, v, ex)? {
+            Some(x) if !x.is_finite() => Err(format!("{name}: expected a finite number")),
+            o => Ok(o),
+        };
+        if let Some(v) = finite("lidar_gate", self.lidar_gate, "0.5 (metres)")? {
+            c.train.loss.lidar_gate_m = v;
+        }
+        if let Some(v) = finite("lidar_band", self.lidar_band, "0.2 (metres)")? {
+            c.train.loss.lidar_band_m = v;
+        }
+        if let Some(v) = finite("lr_z_start", self.lr_z_start, "1.6e-3")? {
+            c.train.lr.z_start = v;
+        }
+        if let Some(v) = finite("lr_z_end", self.lr_z_end, "1.6e-5")? {
+            c.train.lr.z_end = v;
+        }
+        if self.align == Some(false) {
+            c.align = None;
+        }
+        Ok(c)
+    }
+
+    /// The tiling asked for (`None`: let `tiles::choose` decide).
+    pub fn tiling(&self) -> Result<Option<TileConfig>, String> {
+        let overlap_m = match self.tile_overlap_m {
+            Some(o) if !(o.is_finite() && o >= 0.0) => {
+                return Err(format!(
+                    "tile_overlap_m {o}: expected a number of metres, 0 or more, such as 4"
+                ))
+            }
+            o => o.unwrap_or(DEFAULT_OVERLAP_M),
+        };
+        match self.tile_m {
+            None => Ok(None),
+            Some(0.0) => Ok(None),
+            Some(v) if v.is_finite() && v > 0.0 => Ok(Some(TileConfig {
+                size_m: v,
+                overlap_m,
+            })),
+            Some(v) => Err(format!(
+                "tile size {v} m: expected a positive number of metres, such as 64"
+            )),
+        }
+    }
+
+    /// The PLY up axis asked for (default z).
+    pub fn ply_up(&self) -> Result<crate::export::ply::Up, String> {
+        match self.ply_up.as_deref() {
+            None => Ok(crate::export::ply::Up::Z),
+            Some(u) => u.parse().map_err(|e| format!("ply_up: {e}")),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn settings_map_to_the_config_and_bad_values_are_named() {
+        let (m, _) = crate::bundle::example::tiny();
+        let s: Settings = serde_json::from_str(
+            r#"{"resolution": 0.2, "seed": 5, "max_steps": 12, "traj_loss": false,
+                "lidar_gate": 0.7, "lr_z_start": 0.002, "baseline": "ipm", "tile_m": 24}"#,
+        )
+        .expect("settings");
+        let c = s.config(&m, PAGE).expect("config");
+        assert_eq!(c.prepare.grid.resolution, 0.2);
+        assert_eq!((c.train.seed, c.train.max_steps), (5, Some(12)));
+        assert_eq!(c.train.loss.traj, 0.0);
+        assert_eq!(c.train.loss.lidar_gate_m, 0.7);
+        assert_eq!(c.train.lr.z_start, 0.002);
+        assert!(c.baseline_ipm);
+        let t = s.tiling().expect("tiling").expect("tiled");
+        assert_eq!((t.size_m, t.overlap_m), (24.0, DEFAULT_OVERLAP_M));
+        // Defaults: the front end's grid, the bundle's corridor when it has one.
+        let c = Settings::default().config(&m, CLI).expect("config");
+        assert_eq!(c.prepare.grid.resolution, 0.05);
+        let want = m.corridor_half_width_m.unwrap_or(CLI.half_width);
+        assert_eq!(c.prepare.grid.half_width, want);
+        for (json, says) in [
+            (
+                r#"{"lr_z_start": 0}"#,
+                "lr_z_start 0: expected a positive number",
+            ),
+            (r#"{"resolution": -1}"#, "resolution -1"),
+            (r#"{"init": "best"}"#, "init \"best\""),
+            (r#"{"epochs": 0}"#, "epochs 0"),
+            (r#"{"baseline": "rome"}"#, "baseline \"rome\""),
+        ] {
+            let s: Settings = serde_json::from_str(json).expect("settings");
+            let e = s.config(&m, PAGE).expect_err(json);
+            assert!(e.contains(says), "{json}: {e}");
+        }
+        let s: Settings = serde_json::from_str(r#"{"tile_m": -3}"#).expect("settings");
+        assert!(s.tiling().expect_err("tile").contains("tile size -3"));
+        // A misspelled setting is refused, not ignored.
+        let e = serde_json::from_str::<Settings>(r#"{"resolutoin": 0.1}"#).expect_err("typo");
+        assert!(e.to_string().contains("resolutoin"), "{e}");
+    }
+}

@@ -691,20 +691,10 @@ impl Outcome {
 
 /// The report of a finished run (report.json).
 pub fn report(s: &Session, o: &Outcome, bundle: &str) -> serde_json::Value {
-    let t = &s.cfg.train;
     let last = s.losses.last().copied().unwrap_or_default();
     let first = s.losses.first().copied().unwrap_or_default();
-    serde_json::json!({
-        "bundle": bundle,
-        "settings": {
-            "resolution_m": s.cfg.prepare.grid.resolution,
-            "half_width_m": s.cfg.prepare.grid.half_width,
-            "adaptive": s.cfg.prepare.refine.enabled,
-            "init": format!("{:?}", s.cfg.prepare.init.method).to_lowercase(),
-            "lidar": t.use_lidar,
-            "baseline": if s.cfg.baseline_ipm { Some("ipm") } else { None },
-            "train": t,
-        },
+    let mut r = base_report(&s.cfg, o, bundle);
+    let more = serde_json::json!({
         "surfels": s.prepare_report,
         "gpu_bytes_per_surfel": s.bytes_per_surfel_gpu,
         "surfels_with_lidar": s.with_lidar,
@@ -730,6 +720,28 @@ pub fn report(s: &Session, o: &Outcome, bundle: &str) -> serde_json::Value {
         // when --max-steps cut the run short.
         "seconds_per_epoch": (s.steps_done() > 0)
             .then(|| s.timings.train_ms / 1e3 / s.steps_done() as f64 * s.train_views.len() as f64),
+    });
+    if let (Some(r), serde_json::Value::Object(more)) = (r.as_object_mut(), more) {
+        r.extend(more);
+    }
+    r
+}
+
+/// The part of report.json that needs no session: the bundle, the settings, the
+/// map's geometry, its metrics and held-out scores.
+pub fn base_report(c: &ReconstructConfig, o: &Outcome, bundle: &str) -> serde_json::Value {
+    let t = &c.train;
+    serde_json::json!({
+        "bundle": bundle,
+        "settings": {
+            "resolution_m": c.prepare.grid.resolution,
+            "half_width_m": c.prepare.grid.half_width,
+            "adaptive": c.prepare.refine.enabled,
+            "init": format!("{:?}", c.prepare.init.method).to_lowercase(),
+            "lidar": t.use_lidar,
+            "baseline": if c.baseline_ipm { Some("ipm") } else { None },
+            "train": t,
+        },
         "bev": o.geometry,
         "metrics": o.metrics,
         "holdout": o.holdout,

@@ -8,49 +8,69 @@ use crate::bundle::Manifest;
 use crate::init::InitMethod;
 use crate::reconstruct::ReconstructConfig;
 use crate::tiles::{TileConfig, DEFAULT_OVERLAP_M};
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 /// Every setting that changes the map (the page sends them as one object).
-#[derive(Clone, Debug, Default, Deserialize)]
+#[derive(Clone, Debug, Default, Deserialize, Serialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Settings {
     /// Grid spacing, metres.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub resolution: Option<f64>,
     /// Corridor half-width, metres (absent: the bundle's, else the default's).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub half_width: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub epochs: Option<usize>,
     /// Use the bundle's LiDAR (elevation loss and refinement cue); default true.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub lidar: Option<bool>,
     /// Align the poses to the LiDAR; default true.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub align: Option<bool>,
     /// Road-structure-aware refinement; default true.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub adaptive: Option<bool>,
     /// "consensus" (default) or "nearest".
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub init: Option<String>,
     /// The trajectory-prior loss L_traj; default true.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub traj_loss: Option<bool>,
     /// Hold out every K-th frame and report road PSNR on them.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub holdout_every: Option<usize>,
     /// "ipm": write the IPM baseline instead of optimising.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub baseline: Option<String>,
     /// z learning rate at the start and the end, as ratios of the scene extent.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub lr_z_start: Option<f32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub lr_z_end: Option<f32>,
     /// LiDAR gate and band of the elevation loss, metres.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub lidar_gate: Option<f32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub lidar_band: Option<f32>,
     /// Stop after this many steps.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub max_steps: Option<usize>,
     /// Seed of the training image order.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub seed: Option<u64>,
     /// Tile side, metres (absent or 0: untiled unless the drive is large).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub tile_m: Option<f64>,
     /// Overlap of each tile beyond its square, metres.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub tile_overlap_m: Option<f64>,
     /// Up axis of the exported PLY files: "z" (world) or "y" (splat viewers).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub ply_up: Option<String>,
     /// Fault injection for tests: the tile of this plan index fails at its first
     /// step as a lost device would.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub fault_tile: Option<usize>,
 }
 

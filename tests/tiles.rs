@@ -385,12 +385,12 @@ fn a_failed_tile_keeps_the_finished_ones_and_the_run_resumes_from_checkpoints() 
     let mut saved = Vec::new();
     let err = loop {
         match pollster::block_on(a.step(&b)) {
-            Ok(Some(_)) => saved.extend(a.take_checkpoint()),
+            Ok(Some(_)) => saved.extend(std::iter::from_fn(|| a.take_checkpoint())),
             Ok(None) => panic!("the injected fault never came"),
             // The step that fails may have finished the tile before (as the CLI
             // does, take its checkpoint on errors too).
             Err(e) => {
-                saved.extend(a.take_checkpoint());
+                saved.extend(std::iter::from_fn(|| a.take_checkpoint()));
                 break e;
             }
         }

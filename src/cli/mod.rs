@@ -7,6 +7,7 @@ mod example;
 mod gpu;
 mod import;
 mod inspect;
+mod jobs;
 pub mod progress;
 mod reconstruct;
 mod synth;
@@ -94,6 +95,22 @@ enum Command {
     /// report.json. A NaN during optimisation stops it, keeps the
     /// last good model, still writes the outputs and exits non-zero.
     Reconstruct(reconstruct::Args),
+    /// Write a reconstruction's tiles as independent jobs, for a scheduler.
+    ///
+    /// Takes the bundles and settings of `rogs reconstruct` and writes PLAN/plan.json
+    /// (bundles, settings, the run's fingerprint, the tiles in merge order) and
+    /// PLAN/jobs/NAME.json per tile (its square, views, steps, seed and the command
+    /// that runs it). Each job runs with `rogs reconstruct --plan PLAN --tile NAME
+    /// --out TILES/NAME`, anywhere that sees the bundles; `rogs merge` then makes the
+    /// map. Tiles are 96 m unless --tile-m says otherwise. docs/DISTRIBUTED.md.
+    Plan(jobs::PlanArgs),
+    /// Stitch the tile jobs of a plan into the map `rogs reconstruct` would write.
+    ///
+    /// Reads TILES/NAME/NAME.tile for every tile of the plan (a missing or damaged one
+    /// is named, exit code 3), adds them in the plan's order and writes the same
+    /// outputs as `rogs reconstruct`: the layers, GeoTIFFs, PLY, map.rogsmap and
+    /// report.json. The map equals the single-process tiled run's.
+    Merge(jobs::MergeArgs),
 }
 
 pub fn run() -> ExitCode {
@@ -107,6 +124,8 @@ pub fn run() -> ExitCode {
         Command::Bench(b) => bench::run(b),
         Command::Import(a) => import::run(a),
         Command::Reconstruct(a) => reconstruct::run(a),
+        Command::Plan(a) => jobs::plan(a),
+        Command::Merge(a) => jobs::merge(a),
     };
     match result {
         Ok(code) => code,

@@ -30,11 +30,40 @@ enum Baseline {
 pub struct Args {
     /// The scene bundle (.zip or folder); several bundles (drives of the same
     /// streets in one world frame) are merged into one map.
-    #[arg(required = true, num_args = 1..)]
+    #[arg(num_args = 1.., required_unless_present = "plan", conflicts_with = "plan")]
     bundles: Vec<PathBuf>,
     /// Output folder (created if missing; files in it are overwritten).
     #[arg(long)]
     out: PathBuf,
+    #[command(flatten)]
+    settings: SettingsArgs,
+    /// Up axis of surfels.ply and surfels_semantic.ply: z keeps the map's world frame
+    /// (x east, y north, z up); y rotates them for splat viewers that expect y up.
+    #[arg(long, default_value = "z")]
+    ply_up: crate::export::ply::Up,
+    /// Go on from where an earlier run into the same --out stopped: the tiles it
+    /// finished (checkpoints in OUT/tiles/) are kept, the rest are trained. Needs the
+    /// same bundles and options; a checkpoint of other settings is refused by name.
+    #[arg(long)]
+    resume: bool,
+    /// Run one tile job of a plan made by `rogs plan` (with --tile), with the plan's
+    /// bundles and settings: --out receives the tile's checkpoint NAME.tile and
+    /// job.json. A valid checkpoint already there is kept (the job is done); a
+    /// damaged one is trained again.
+    #[arg(long, requires = "tile", conflicts_with = "SettingsArgs")]
+    plan: Option<PathBuf>,
+    /// The tile of --plan to run, by name (`x3_y-2`; plan.json lists them).
+    #[arg(long, requires = "plan")]
+    tile: Option<String>,
+    /// Fault injection for tests: the tile of this plan index (0-based) fails at its
+    /// first step as a lost device would.
+    #[arg(long, hide = true)]
+    fault_tile: Option<usize>,
+}
+
+/// The settings that change the map, shared by `rogs reconstruct` and `rogs plan`.
+#[derive(clap::Args)]
+pub struct SettingsArgs {
     /// Passes over the training images; the paper's one-epoch schedule is the default.
     #[arg(long, default_value_t = 1)]
     epochs: usize,
@@ -95,85 +124,77 @@ pub struct Args {
     seed: u64,
     /// Train the map in square tiles of this side (metres, world-aligned), one
     /// after the other, so the GPU holds one tile at a time. Default: untiled, unless
-    /// the corridor would hold over 4 M surfels, then 96 m tiles.
+    /// the corridor would hold over 4 M surfels, then 96 m tiles (`rogs plan`: 96 m).
     #[arg(long, value_parser = positive_m64)]
     tile_m: Option<f64>,
     /// Each tile also trains this far beyond its square (metres); neighbouring
     /// tiles' layers are blended over twice this width.
     #[arg(long, default_value_t = DEFAULT_OVERLAP_M, value_parser = non_negative_m64)]
     tile_overlap_m: f64,
-    /// Up axis of surfels.ply and surfels_semantic.ply: z keeps the map's world frame
-    /// (x east, y north, z up); y rotates them for splat viewers that expect y up.
-    #[arg(long, default_value = "z")]
-    ply_up: crate::export::ply::Up,
-    /// Go on from where an earlier run into the same --out stopped: the tiles it
-    /// finished (checkpoints in OUT/tiles/) are kept, the rest are trained. Needs the
-    /// same bundles and options; a checkpoint of other settings is refused by name.
-    #[arg(long)]
-    resume: bool,
-    /// Fault injection for tests: the tile of this plan index (0-based) fails at its
-    /// first step as a lost device would.
-    #[arg(long, hide = true)]
-    fault_tile: Option<usize>,
 }
 
-/// The run's settings, as the page would send them.
-fn settings(a: &Args) -> Settings {
-    Settings {
-        resolution: Some(a.resolution),
-        half_width: a.half_width,
-        epochs: Some(a.epochs),
-        lidar: Some(!a.no_lidar),
-        align: Some(!a.no_pose_align),
-        adaptive: Some(!a.no_adaptive),
-        init: Some(
-            match a.init {
-                Init::Nearest => "nearest",
-                Init::Consensus => "consensus",
-            }
-            .into(),
-        ),
-        traj_loss: Some(!a.no_traj_loss),
-        holdout_every: a.holdout_every,
-        baseline: a.baseline.map(|_| "ipm".into()),
-        lr_z_start: a.lr_z_start,
-        lr_z_end: a.lr_z_end,
-        lidar_gate: a.lidar_gate,
-        lidar_band: a.lidar_band,
-        max_steps: a.max_steps,
-        seed: Some(a.seed),
-        tile_m: a.tile_m,
-        tile_overlap_m: Some(a.tile_overlap_m),
-        ply_up: None,
-        fault_tile: a.fault_tile,
+impl SettingsArgs {
+    /// The run's settings, as the page would send them.
+    pub fn settings(&self) -> Settings {
+        let a = self;
+        Settings {
+            resolution: Some(a.resolution),
+            half_width: a.half_width,
+            epochs: Some(a.epochs),
+            lidar: Some(!a.no_lidar),
+            align: Some(!a.no_pose_align),
+            adaptive: Some(!a.no_adaptive),
+            init: Some(
+                match a.init {
+                    Init::Nearest => "nearest",
+                    Init::Consensus => "consensus",
+                }
+                .into(),
+            ),
+            traj_loss: Some(!a.no_traj_loss),
+            holdout_every: a.holdout_every,
+            baseline: a.baseline.map(|_| "ipm".into()),
+            lr_z_start: a.lr_z_start,
+            lr_z_end: a.lr_z_end,
+            lidar_gate: a.lidar_gate,
+            lidar_band: a.lidar_band,
+            max_steps: a.max_steps,
+            seed: Some(a.seed),
+            tile_m: a.tile_m,
+            tile_overlap_m: Some(a.tile_overlap_m),
+            ply_up: None,
+            fault_tile: None,
+        }
     }
 }
 
-pub fn run(a: Args) -> Result<ExitCode, String> {
+/// Opens the bundles and merges them into one; on bad input, the exit code (the
+/// problem is printed).
+pub(super) fn open_bundles(paths: &[PathBuf]) -> Result<Bundle, ExitCode> {
     let mut bundles = Vec::new();
-    for path in &a.bundles {
+    for path in paths {
         let mut bar = Progress::new("open");
         match Bundle::open(path, Limits::default(), &mut |d, t| bar.update(d, t)) {
             Ok(b) => bundles.push(b),
             Err(e) => {
                 bar.finish();
                 eprintln!("{}: invalid bundle: {e}", path.display());
-                return Ok(ExitCode::from(EXIT_INVALID_INPUT));
+                return Err(ExitCode::from(EXIT_INVALID_INPUT));
             }
         }
         bar.finish();
     }
-    let names: Vec<String> = a.bundles.iter().map(|p| p.display().to_string()).collect();
-    let mut b = match Bundle::merge(bundles, &names) {
-        Ok(b) => b,
-        Err(e) => {
-            eprintln!("cannot merge the drives into one map: {e}");
-            return Ok(ExitCode::from(EXIT_INVALID_INPUT));
-        }
-    };
-    std::fs::create_dir_all(&a.out)
-        .map_err(|e| format!("cannot create {}: {e}", a.out.display()))?;
-    let s = settings(&a);
+    let names: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
+    Bundle::merge(bundles, &names).map_err(|e| {
+        eprintln!("cannot merge the drives into one map: {e}");
+        ExitCode::from(EXIT_INVALID_INPUT)
+    })
+}
+
+/// Aligns, plans and prepares the run of settings `s` on `b`; `tiled`: always in
+/// tiles (96 m when `s` names no size), as a plan is. Bad input is printed and
+/// answered with its exit code.
+pub(super) fn start(b: &mut Bundle, s: &Settings, tiled: bool) -> Result<TiledRun, ExitCode> {
     let (cfg, asked) = match s
         .config(&b.manifest, crate::settings::CLI)
         .and_then(|c| Ok((c, s.tiling()?)))
@@ -181,21 +202,51 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
         Ok(v) => v,
         Err(e) => {
             eprintln!("invalid settings: {e}");
-            return Ok(ExitCode::from(EXIT_INVALID_INPUT));
+            return Err(ExitCode::from(EXIT_INVALID_INPUT));
         }
     };
-    let tiling = crate::tiles::choose(&b.manifest, &cfg, asked);
-    let ctx = GpuContext::new_blocking().map_err(|e| e.to_string())?;
+    let tiling = match tiled {
+        true => Some(asked.unwrap_or_default()),
+        false => crate::tiles::choose(&b.manifest, &cfg, asked),
+    };
+    let ctx = match GpuContext::new_blocking() {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return Err(ExitCode::from(EXIT_MACHINE));
+        }
+    };
     eprintln!("preparing surfels…");
-    let mut run = match pollster::block_on(TiledRun::new(&mut b, cfg, tiling, ctx)) {
-        Ok(r) => r,
+    match pollster::block_on(TiledRun::new(b, cfg, tiling, ctx)) {
+        Ok(r) => Ok(r),
         Err(e) if e.is_input() => {
             eprintln!("cannot map this bundle with these settings: {e}");
-            return Ok(ExitCode::from(EXIT_INVALID_INPUT));
+            Err(ExitCode::from(EXIT_INVALID_INPUT))
         }
-        Err(e) => return Err(e.to_string()),
+        Err(e) => {
+            eprintln!("error: {e}");
+            Err(ExitCode::from(EXIT_MACHINE))
+        }
+    }
+}
+
+pub fn run(a: Args) -> Result<ExitCode, String> {
+    if let (Some(plan), Some(tile)) = (&a.plan, &a.tile) {
+        return super::jobs::run_tile(plan, tile, &a.out);
+    }
+    let names: Vec<String> = a.bundles.iter().map(|p| p.display().to_string()).collect();
+    let mut b = match open_bundles(&a.bundles) {
+        Ok(b) => b,
+        Err(code) => return Ok(code),
     };
-    run.fault_tile = s.fault_tile;
+    std::fs::create_dir_all(&a.out)
+        .map_err(|e| format!("cannot create {}: {e}", a.out.display()))?;
+    let s = a.settings.settings();
+    let mut run = match start(&mut b, &s, false) {
+        Ok(r) => r,
+        Err(code) => return Ok(code),
+    };
+    run.fault_tile = a.fault_tile;
     let tiles_dir = a.out.join("tiles");
     if run.tiling.is_some() {
         run.checkpoints = true;
@@ -235,12 +286,40 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
             }
         }
     }
+    let stopped = train(&mut run, &b, &tiles_dir)?;
+    if stopped && run.tiling.is_some() {
+        eprintln!(
+            "{} finished tiles are kept in {}: run the same command with --resume to go on",
+            run.tiles_done(),
+            tiles_dir.display()
+        );
+    }
+    write_map(&a.out, &mut run, &b, &names.join(" + "), a.ply_up)?;
+    if !stopped && tiles_dir.is_dir() {
+        // The map is written: its tiles' checkpoints are no longer needed.
+        let _ = std::fs::remove_dir_all(&tiles_dir);
+    }
+    Ok(if stopped {
+        ExitCode::from(EXIT_MACHINE)
+    } else {
+        ExitCode::SUCCESS
+    })
+}
+
+/// Steps the run to its end with a progress bar, writing each finished tile's
+/// checkpoint into `tiles_dir`; true when a failure stopped it (it is printed).
+pub(super) fn train(
+    run: &mut TiledRun,
+    b: &Bundle,
+    tiles_dir: &std::path::Path,
+) -> Result<bool, String> {
     let mut bar = Progress::new("optimise");
-    let mut stopped = None;
+    let mut stopped = false;
     loop {
-        match pollster::block_on(run.step(&b)) {
+        let r = pollster::block_on(run.step(b));
+        write_checkpoints(run, tiles_dir)?;
+        match r {
             Ok(Some(l)) => {
-                write_checkpoint(&mut run, &tiles_dir)?;
                 let tile = match run.current_tile() {
                     Some((k, name)) => format!("tile {}/{} {name}, ", k + 1, run.tile_count()),
                     None => String::new(),
@@ -248,46 +327,47 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
                 bar.set_message(&format!("{tile}loss {:.4}", l.total()));
                 bar.update(run.steps_done(), run.total_steps());
             }
-            Ok(None) => {
-                write_checkpoint(&mut run, &tiles_dir)?;
-                break;
-            }
+            Ok(None) => break,
             Err(e) => {
-                write_checkpoint(&mut run, &tiles_dir)?;
                 eprintln!("\nerror: {e}");
-                if run.tiling.is_some() {
-                    eprintln!(
-                        "{} finished tiles are kept in {}: run the same command with --resume to go on",
-                        run.tiles_done(),
-                        tiles_dir.display()
-                    );
-                }
-                stopped = Some(e.to_string());
+                stopped = true;
                 break;
             }
         }
     }
     bar.finish();
+    Ok(stopped)
+}
+
+/// Stitches and scores the run's map and writes every output into `out`: the
+/// model first (training is never lost, whatever happens to the BEV), then the
+/// layers, report.json and map.rogsmap.
+pub(super) fn write_map(
+    out: &std::path::Path,
+    run: &mut TiledRun,
+    b: &Bundle,
+    name: &str,
+    ply_up: crate::export::ply::Up,
+) -> Result<(), String> {
     let mut bar = Progress::new("BEV");
-    let outcome = pollster::block_on(run.finish(&b, &mut |d, t| bar.update(d, t)));
+    let outcome = pollster::block_on(run.finish(b, &mut |d, t| bar.update(d, t)));
     bar.finish();
-    // The model is written whatever happened to the BEV: training is never lost.
     let (p, origin) = run.model();
-    let model = crate::export::model_files(p, origin, &b.manifest, a.ply_up);
-    write_files(&a.out, &model)?;
+    let model = crate::export::model_files(p, origin, &b.manifest, ply_up);
+    write_files(out, &model)?;
     let o = outcome.map_err(|e| {
         format!(
             "{e} (the trained model was written to {})",
-            a.out.join("surfels.ply").display()
+            out.join("surfels.ply").display()
         )
     })?;
     let mut files = crate::export::files(&o, &b.manifest)?;
-    let report = run.report(&b, &o, &names.join(" + "));
+    let report = run.report(b, &o, name);
     let report = serde_json::to_vec_pretty(&report).map_err(|e| e.to_string())?;
-    let map = crate::export::map_file::write(&o, &b, &report)?;
+    let map = crate::export::map_file::write(&o, b, &report)?;
     files.push(("report.json".into(), report));
     files.push(("map.rogsmap".into(), map));
-    write_files(&a.out, &files)?;
+    write_files(out, &files)?;
     if let Some(m) = &o.metrics {
         eprintln!("metrics: {}", serde_json::to_string(m).unwrap_or_default());
     }
@@ -300,30 +380,25 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
     eprintln!(
         "wrote {} files to {}",
         model.len() + files.len(),
-        a.out.display()
+        out.display()
     );
-    if stopped.is_none() && tiles_dir.is_dir() {
-        // The map is written: its tiles' checkpoints are no longer needed.
-        let _ = std::fs::remove_dir_all(&tiles_dir);
-    }
-    Ok(if stopped.is_some() {
-        ExitCode::from(EXIT_MACHINE)
-    } else {
-        ExitCode::SUCCESS
-    })
+    Ok(())
 }
 
-/// Writes the checkpoint of the tile just finished, if any (`name.tile.part`, then
-/// renamed: a run killed while writing leaves no half checkpoint).
-fn write_checkpoint(run: &mut TiledRun, dir: &std::path::Path) -> Result<(), String> {
-    let Some((name, bytes)) = run.take_checkpoint() else {
-        return Ok(());
-    };
-    std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
-    let part = dir.join(format!("{name}.part"));
-    std::fs::write(&part, &bytes).map_err(|e| format!("cannot write {}: {e}", part.display()))?;
-    let to = dir.join(&name);
-    std::fs::rename(&part, &to).map_err(|e| format!("cannot write {}: {e}", to.display()))
+/// Writes the checkpoints of the tiles finished since the last call
+/// (`name.tile.part`, then renamed: a run killed while writing leaves no half
+/// checkpoint).
+pub(super) fn write_checkpoints(run: &mut TiledRun, dir: &std::path::Path) -> Result<(), String> {
+    while let Some((name, bytes)) = run.take_checkpoint() {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+        let part = dir.join(format!("{name}.part"));
+        std::fs::write(&part, &bytes)
+            .map_err(|e| format!("cannot write {}: {e}", part.display()))?;
+        let to = dir.join(&name);
+        std::fs::rename(&part, &to).map_err(|e| format!("cannot write {}: {e}", to.display()))?;
+    }
+    Ok(())
 }
 
 /// Restores every checkpoint in `dir`; the count, or which file was refused and why.

@@ -24,6 +24,7 @@
 
 pub mod checkpoint;
 mod files;
+pub mod jobs;
 pub mod tile;
 
 pub use files::{
@@ -50,7 +51,7 @@ use serde::Serialize;
 use web_time::Instant;
 
 /// How the map is cut.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, serde::Deserialize)]
 pub struct TileConfig {
     /// Side of a tile's core, metres.
     pub size_m: f64,
@@ -71,6 +72,8 @@ impl Default for TileConfig {
 /// The tile size chosen when a drive is too large to map in one piece.
 pub const DEFAULT_TILE_M: f64 = 96.0;
 pub const DEFAULT_OVERLAP_M: f64 = 4.0;
+/// The report's `stopped` of a tile with no surfels or no training view.
+pub const SKIPPED: &str = "skipped: no surfels, or no training view sees them";
 /// A drive whose corridor is estimated above this many surfels is tiled by default.
 pub const AUTO_TILE_SURFELS: f64 = 4.0e6;
 
@@ -407,6 +410,8 @@ pub struct TiledRun {
     pub reports: Vec<TileReport>,
     pub alignment: Option<AlignSummary>,
     pub align_ms: f64,
+    /// Time to stitch and score the map (`finish`).
+    pub eval_ms: f64,
     /// The map's geometry (the truth raster's, or the corridor's bounding box).
     pub geometry: BevGeometry,
     truth: Option<BevRaster>,
@@ -432,7 +437,7 @@ pub struct TiledRun {
     done: Vec<bool>,
     /// Encode a checkpoint of every tile as it finishes (`take_checkpoint`).
     pub checkpoints: bool,
-    pending: Option<(String, Vec<u8>)>,
+    pending: std::collections::VecDeque<(String, Vec<u8>)>,
     /// Hash of the manifest, the settings and the plan: checkpoints carry it.
     pub fingerprint: u64,
     /// Fault injection for tests of failure and resume: the tile of this plan index
@@ -484,6 +489,7 @@ impl TiledRun {
             reports: Vec::new(),
             alignment,
             align_ms,
+            eval_ms: 0.0,
             geometry: BevGeometry::around(std::iter::empty(), 1.0, 0.0),
             stitch: Stitcher::new(BevGeometry::around(std::iter::empty(), 1.0, 0.0), 1, 0.0),
             truth,
@@ -505,7 +511,7 @@ impl TiledRun {
             failed_index: None,
             done: Vec::new(),
             checkpoints: false,
-            pending: None,
+            pending: Default::default(),
             fingerprint: 0,
             fault_tile: None,
             cfg,
@@ -678,21 +684,29 @@ impl TiledRun {
                 }
                 Err(ReconstructError::EmptyTile) => {
                     // Its planned steps never come: the total follows what runs.
-                    let epochs = if self.cfg.baseline_ipm {
-                        0
-                    } else {
-                        self.cfg.train.epochs
-                    };
-                    let planned = (tile.views.len() * epochs)
-                        .min(self.cfg.train.max_steps.unwrap_or(usize::MAX));
+                    let planned = self.planned_steps_of(&tile);
                     self.planned_steps = self.planned_steps.saturating_sub(planned);
-                    self.reports.push(TileReport {
-                        name: tile.name(),
-                        core: Some(tile.core),
-                        rect: Some(tile.rect),
-                        stopped: Some("skipped: no surfels, or no training view sees them".into()),
+                    let skipped = Finished {
+                        index: self.started - 1,
+                        report: TileReport {
+                            name: tile.name(),
+                            core: Some(tile.core),
+                            rect: Some(tile.rect),
+                            stopped: Some(SKIPPED.into()),
+                            ..Default::default()
+                        },
                         ..Default::default()
-                    });
+                    };
+                    // A skipped tile is finished too: its checkpoint says so, and a
+                    // resumed run or a merge of tile jobs does not try it again.
+                    if self.checkpoints {
+                        self.pending.push_back((
+                            format!("{}{}", skipped.report.name, checkpoint::SUFFIX),
+                            checkpoint::encode(&skipped, self.fingerprint)
+                                .map_err(GpuError::Failed)?,
+                        ));
+                    }
+                    self.apply(skipped);
                 }
                 Err(e) if e.not_loaded().is_some() => {
                     // Not a failure: this tile starts again once its files are there.
@@ -775,7 +789,7 @@ impl TiledRun {
             restored: false,
         };
         if self.checkpoints && tile.is_some() && s.stopped.is_none() {
-            self.pending = Some((
+            self.pending.push_back((
                 format!("{}{}", done.report.name, checkpoint::SUFFIX),
                 checkpoint::encode(&done, self.fingerprint).map_err(GpuError::Failed)?,
             ));
@@ -818,10 +832,11 @@ impl TiledRun {
         self.reports.push(f.report);
     }
 
-    /// The checkpoint of the tile just finished, once (`checkpoints` on): its file
-    /// name (`x3_y-2.tile`) and bytes. Write it where `restore` will find it.
+    /// The checkpoint of a tile finished (or skipped) since the last call, once
+    /// (`checkpoints` on): its file name (`x3_y-2.tile`) and bytes. Call until `None`
+    /// and write each where `restore` will find it.
     pub fn take_checkpoint(&mut self) -> Option<(String, Vec<u8>)> {
-        self.pending.take()
+        self.pending.pop_front()
     }
 
     /// Adds a tile finished by an earlier run of the same bundles and settings from
@@ -861,9 +876,11 @@ impl TiledRun {
         if self.done.get(f.index).copied().unwrap_or(false) {
             return Err(bad(format!("tile {name} was restored twice")));
         }
+        let skipped = f.report.stopped.as_deref() == Some(SKIPPED) && f.layers.is_none();
         let want = self
             .stitch
             .window(&tile.rect)
+            .filter(|_| !skipped)
             .map(|w| (w.geometry.width, w.geometry.height));
         let got = f.layers.as_ref().map(|l| (l.bev.width, l.bev.height));
         let channels_ok = f
@@ -876,17 +893,43 @@ impl TiledRun {
                 "tile {name}'s layers are {got:?} px, the map's window for it is {want:?} px"
             )));
         }
+        let planned = self.planned_steps_of(tile);
+        self.planned_steps = self.planned_steps.saturating_sub(planned);
+        f.report.restored = true;
+        self.apply(f);
+        Ok(name)
+    }
+
+    /// Narrows the run to the tile of plan index `index` (a tile job of a plan,
+    /// `rogs reconstruct --plan --tile`): the others are neither trained nor
+    /// stitched, and the run's steps are that tile's. Before the first step.
+    pub fn only(&mut self, index: usize) -> Result<(), ReconstructError> {
+        let Some(tile) = self.tiles.get(index) else {
+            return Err(ReconstructError::Checkpoint(format!(
+                "tile {index} is not in this run's plan of {} tiles",
+                self.tiles.len()
+            )));
+        };
+        if self.started > 0 {
+            return Err(ReconstructError::Checkpoint(
+                "a run is narrowed to one tile before its first step".into(),
+            ));
+        }
+        self.planned_steps = self.planned_steps_of(tile);
+        for (k, d) in self.done.iter_mut().enumerate() {
+            *d = k != index;
+        }
+        Ok(())
+    }
+
+    /// The steps the schedule gives tile `t` (its views × epochs, within the limit).
+    fn planned_steps_of(&self, t: &Tile) -> usize {
         let epochs = if self.cfg.baseline_ipm {
             0
         } else {
             self.cfg.train.epochs
         };
-        let planned =
-            (tile.views.len() * epochs).min(self.cfg.train.max_steps.unwrap_or(usize::MAX));
-        self.planned_steps = self.planned_steps.saturating_sub(planned);
-        f.report.restored = true;
-        self.apply(f);
-        Ok(name)
+        (t.views.len() * epochs).min(self.cfg.train.max_steps.unwrap_or(usize::MAX))
     }
 
     /// After a tile failed for a reason of the machine (a lost device, not bad
@@ -942,8 +985,9 @@ impl TiledRun {
             holdout,
             min_alpha,
         )?;
+        self.eval_ms = t.elapsed().as_secs_f64() * 1e3;
         if let Some(s) = self.session.as_mut() {
-            s.timings.eval_ms = t.elapsed().as_secs_f64() * 1e3;
+            s.timings.eval_ms = self.eval_ms;
         }
         Ok(o)
     }
@@ -998,16 +1042,31 @@ impl TiledRun {
     /// report.json: the session's report for an untiled run, with the tiles and the
     /// run's peak memory; totals over the tiles for a tiled one.
     pub fn report(&self, b: &Bundle, o: &Outcome, bundle: &str) -> serde_json::Value {
-        let Some(s) = &self.session else {
-            return serde_json::json!({ "bundle": bundle, "stopped": self.failed });
+        let mut r = match &self.session {
+            Some(s) => report(s, o, bundle),
+            // Every tile restored (a merge of tile jobs, a resume with nothing left).
+            None if self.tiling.is_some() => crate::reconstruct::base_report(&self.cfg, o, bundle),
+            None => return serde_json::json!({ "bundle": bundle, "stopped": self.failed }),
         };
-        let mut r = report(s, o, bundle);
+        if self.session.is_none() {
+            if let Some(last) = self.reports.iter().rev().find(|t| t.steps > 0) {
+                r["loss_last"] = serde_json::to_value(last.loss_last).unwrap_or_default();
+            }
+        }
         r["pose_alignment"] = serde_json::to_value(&self.alignment).unwrap_or_default();
         r["timings"]["align_ms"] = self.align_ms.into();
+        r["timings"]["eval_ms"] = self.eval_ms.into();
         r["tiling"] = serde_json::to_value(self.tiling).unwrap_or_default();
         r["tiles"] = serde_json::to_value(&self.reports).unwrap_or_default();
         r["tile_count"] = self.reports.len().into();
-        r["peak_gpu_bytes"] = serde_json::to_value(self.peak_gpu_bytes).unwrap_or_default();
+        // Tiles trained elsewhere (restored) bring their own peaks.
+        let peak_gpu = self
+            .reports
+            .iter()
+            .filter_map(|t| t.peak_gpu_bytes)
+            .chain(self.peak_gpu_bytes)
+            .max();
+        r["peak_gpu_bytes"] = serde_json::to_value(peak_gpu).unwrap_or_default();
         r["peak_host_bytes"] =
             serde_json::to_value(crate::mem::peak_host_bytes()).unwrap_or_default();
         r["world_frame"] = serde_json::to_value(&b.manifest.world_frame).unwrap_or_default();

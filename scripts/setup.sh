@@ -41,6 +41,13 @@ if ! wasm-bindgen --version 2>/dev/null | grep -q ' 0.2.130'; then
   say "installing wasm-bindgen-cli 0.2.130 (about 5 minutes, once)"
   cargo install wasm-bindgen-cli --version 0.2.130 --force
 fi
+# Ray runs the tile jobs in the distributed-path test (a real local cluster), from a
+# virtual environment of its own (.venv; scripts/ray_map.py runs with any Python that has ray).
+if ! .venv/bin/python -c 'import ray' 2>/dev/null; then
+  say "installing Ray into .venv (about 30 s, once)"
+  python3 -m venv .venv
+  .venv/bin/pip install --quiet --disable-pip-version-check "ray==2.60.0"
+fi
 if [ ! -d node_modules/playwright-core ] || [ ! -d node_modules/@playcanvas/splat-transform ]; then
   say "installing npm packages"
   npm ci --no-audit --no-fund

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Every test: format, lints (native and wasm32), native tests on lavapipe, wasm tests
-# in headless Chromium (WebGPU on SwiftShader), and the page tests with Playwright.
+# in headless Chromium (WebGPU on SwiftShader), the page tests with Playwright, and the
+# tile jobs on a real local Ray cluster.
 # A missing GPU adapter fails the run: GPU tests never skip.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -20,6 +21,9 @@ step "native tests on $(WGPU_BACKEND=$WGPU_BACKEND echo "$WGPU_BACKEND")"
 cargo build --bins --examples
 ./target/debug/rogs gpu
 cargo test
+
+step "tile jobs on a local Ray cluster"
+.venv/bin/python -m unittest discover -s tests/ray -v
 
 step "wasm tests in headless Chromium"
 wasm-pack test --headless --chrome --chromedriver /usr/bin/chromedriver --mode no-install

@@ -5,7 +5,7 @@
 // to the first step, the wasm heap and the bundle bytes held at most while the
 // steps run (a tile's files), and the bytes read in all. ROGS_EAGER=1 reads the
 // bundle whole instead (it must be under 256 MiB), for a side-by-side figure. Build the wasm first
-// (wasm-pack build --release --target web --out-dir www/pkg --no-typescript --no-pack).
+// (bash scripts/build-wasm.sh).
 import fs from 'node:fs';
 import { openBench } from './bench-browser.mjs';
 

@@ -1,6 +1,6 @@
 // Times the in-page optimisation of a bundle in headless Chromium (WebGPU on
 // SwiftShader): `node scripts/bench-page.mjs BUNDLE.zip [resolution] [steps]`. Serves
-// www/ (build it first: wasm-pack build --release --target web --out-dir www/pkg) and
+// www/ (build it first: bash scripts/build-wasm.sh) and
 // prints the steps, seconds per step and total time as JSON. With `steps`, it stops
 // the run after that many steps (large bundles: time per step without a whole epoch).
 import { openBench } from './bench-browser.mjs';

@@ -1,7 +1,6 @@
 // The rasteriser benchmark (`rogs bench raster`) in headless Chromium (WebGPU on
 // SwiftShader): `node scripts/bench-raster-page.mjs BUNDLE.zip [frame] [view] [runs]
-// [resolution]`. Serves www/ (build it first: wasm-pack build --release --target web
-// --out-dir www/pkg), calls the wasm export `bench_raster` in the page and prints its
+// [resolution]`. Serves www/ (build it first: bash scripts/build-wasm.sh), calls the wasm export `bench_raster` in the page and prints its
 // JSON: pixel×surfel pairs per second forward and forward+backward, median of the runs.
 import { openBench } from './bench-browser.mjs';
 

@@ -3,8 +3,7 @@
 // (File.slice), reports the time to the first complete view, then pans along the
 // trajectory at full resolution and zooms in and out for `frames` animation frames
 // each, and prints frames per second, draw times, tiles read and bytes fetched as
-// JSON. Serves www/ (build the wasm first: wasm-pack build --release --target web
-// --out-dir www/pkg --no-typescript --no-pack).
+// JSON. Serves www/ (build the wasm first: bash scripts/build-wasm.sh).
 import fs from 'node:fs';
 import path from 'node:path';
 import { openBench } from './bench-browser.mjs';

@@ -28,6 +28,9 @@ step "tile jobs on a local Ray cluster"
 step "wasm tests in headless Chromium"
 wasm-pack test --headless --chrome --chromedriver /usr/bin/chromedriver --mode no-install
 
+step "the published site: release wasm and demo (npm run build)"
+bash scripts/build.sh
+
 step "page tests (Playwright, headless Chromium)"
 wasm-pack build --dev --target web --out-dir www/pkg --mode no-install --no-typescript --no-pack
 cargo run --quiet --example page_fixtures -- target/page-fixtures

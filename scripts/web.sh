@@ -7,7 +7,7 @@ cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 . scripts/env.sh
 echo "web: building the engine for the browser (wasm, release; a few minutes the first time)…"
-wasm-pack build --release --target web --out-dir www/pkg --mode no-install --no-typescript --no-pack
+bash scripts/build-wasm.sh
 if [ ! -f www/demo/demo.zip ] || [ ! -f www/demo/demo-truth.rogsmap ]; then
   node scripts/make-demo.mjs
 fi

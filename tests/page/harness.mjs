@@ -18,11 +18,15 @@ const FLAGS = [
 
 export const env = { server: null, browser: null, base: '' };
 
-// Registers the file's before/after hooks: the server and the browser.
-export function useBrowser() {
+// Registers the file's before/after hooks: the server and the browser. `site`: the
+// folder served at / (www/, or dist/ for the published site with its own demo).
+export function useBrowser({ site = 'www' } = {}) {
   before(async () => {
     fs.mkdirSync(shots, { recursive: true });
-    env.server = createServer([['/fixtures/', fixtures], ['/demo/', fixtures], ['/', path.join(root, 'www')]]);
+    const www = path.join(root, site);
+    env.server = createServer(site === 'www'
+      ? [['/fixtures/', fixtures], ['/demo/', fixtures], ['/', www]]
+      : [['/fixtures/', fixtures], ['/', www]]);
     await new Promise((r) => env.server.listen(0, '127.0.0.1', r));
     env.base = `http://127.0.0.1:${env.server.address().port}`;
     env.browser = await chromium.launch({ executablePath: '/usr/bin/chromium', args: FLAGS });

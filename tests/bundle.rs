@@ -633,3 +633,98 @@ fn unknown_fields_are_warned_about_with_the_nearest_known_name() {
     let (m, files) = example::tiny();
     assert!(open(&m, &files).expect("valid").warnings.is_empty());
 }
+
+#[test]
+fn a_truncated_image_is_named_when_images_are_decoded_as_inspect_does() {
+    let (m, mut files) = example::tiny();
+    let path = "images/front/000001.png";
+    let whole = files
+        .iter()
+        .find(|(p, _)| p == path)
+        .expect("image")
+        .1
+        .clone();
+    // The header (and so the size) is intact; the pixels are cut off.
+    replace(&mut files, path, whole[..whole.len() * 2 / 3].to_vec());
+    assert!(
+        open(&m, &files).is_ok(),
+        "headers only: the run names it when it decodes it"
+    );
+    let limits = Limits {
+        decode_images: true,
+        ..Limits::default()
+    };
+    let p = Bundle::from_zip_bytes(zip(&m, &files), limits)
+        .err()
+        .expect("refused when decoded")
+        .0;
+    assert!(matches!(&p[..], [Problem::ImageDecode { .. }]), "{p:?}");
+    assert_eq!(p[0].location(), path);
+}
+
+#[test]
+fn legal_but_useless_bundles_are_warned_with_advice() {
+    let warnings = |m: &Manifest, files: &[BundleFile]| -> Vec<String> {
+        open(m, files).expect("a legal bundle").warnings
+    };
+    let (m, files) = example::tiny();
+    let w = warnings(&m, &files);
+    assert!(w.is_empty(), "the example is useful: {w:?}");
+
+    // A vehicle standing still.
+    let mut still = m.clone();
+    let first = still.frames[0].vehicle_to_world;
+    for f in &mut still.frames {
+        f.vehicle_to_world = first;
+    }
+    let w = warnings(&still, &files);
+    assert!(
+        w.iter()
+            .any(|s| s.contains("moves 0.00 m") && s.contains("poses")),
+        "{w:?}"
+    );
+
+    // Every label pixel of an ignored class (sky, id 10).
+    let mut sky = files.clone();
+    for (p, bytes) in &mut sky {
+        if p.starts_with("labels/") {
+            *bytes = png_gray(&image::GrayImage::from_pixel(64, 48, image::Luma([10])));
+        }
+    }
+    let w = warnings(&m, &sky);
+    assert!(
+        w.iter()
+            .any(|s| s.contains("no label pixel is of a road class (road, lane_marking)")),
+        "{w:?}"
+    );
+
+    // A second camera whose labels never show the road.
+    let mut two = m.clone();
+    let mut files2 = files.clone();
+    let mut rear = two.cameras[0].clone();
+    rear.name = "rear".into();
+    two.cameras.push(rear);
+    for (i, f) in two.frames.iter_mut().enumerate() {
+        let mut v = f.views[0].clone();
+        v.camera = "rear".into();
+        v.image = format!("images/rear/{i:06}.png");
+        v.label = format!("labels/rear/{i:06}.png");
+        let img = files
+            .iter()
+            .find(|(p, _)| *p == f.views[0].image)
+            .expect("image");
+        files2.push((v.image.clone(), img.1.clone()));
+        files2.push((
+            v.label.clone(),
+            png_gray(&image::GrayImage::from_pixel(64, 48, image::Luma([10]))),
+        ));
+        f.views.push(v);
+    }
+    let w = warnings(&two, &files2);
+    assert!(
+        w.iter()
+            .any(|s| s.contains("camera rear never sees the road")),
+        "{w:?}"
+    );
+    assert!(!w.iter().any(|s| s.contains("camera front")), "{w:?}");
+}

@@ -184,3 +184,18 @@ fn a_run_that_failed_at_a_tile_resumes_with_the_finished_tiles() {
     std::fs::remove_file(zip).ok();
     std::fs::remove_dir_all(out).ok();
 }
+
+#[test]
+fn inspect_decodes_every_image_and_names_a_truncated_one() {
+    let (m, mut files) = rogs::bundle::example::tiny();
+    let path = "images/front/000002.png";
+    let f = files.iter_mut().find(|(p, _)| p == path).expect("image");
+    f.1.truncate(f.1.len() / 2);
+    let zip = temp("truncated.zip");
+    std::fs::write(&zip, rogs::bundle::write_zip(&m, &files).expect("zip")).expect("write");
+    let o = rogs(&["inspect", zip.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(3), "{err}");
+    assert!(err.contains(path), "{err}");
+    std::fs::remove_file(zip).ok();
+}

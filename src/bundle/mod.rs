@@ -164,9 +164,14 @@ impl Bundle {
         limits: Limits,
         progress: &mut dyn FnMut(usize, usize),
     ) -> Result<Self, BundleErrors> {
-        Self::open_with(source, limits, &mut |m, s, l| {
-            validate::validate(m, s, l, progress)
-        })
+        let mut advice = Vec::new();
+        let mut b = Self::open_with(source, limits, &mut |m, s, l| {
+            let (problems, a) = validate::validate(m, s, l, progress);
+            advice = a;
+            problems
+        })?;
+        b.warnings.extend(advice);
+        Ok(b)
     }
 
     /// The files of view `view` of frame `frame` (image, label).

@@ -19,6 +19,11 @@ pub struct Limits {
     pub max_total_bytes: u64,
     /// Largest image width or height.
     pub max_image_side: u32,
+    /// Decode every camera image when the bundle is opened (`rogs inspect`, the page's
+    /// check of a dropped bundle), so that a truncated or corrupt image is named
+    /// before any work; otherwise only headers are read and each image is decoded
+    /// when a step uses it.
+    pub decode_images: bool,
 }
 
 impl Default for Limits {
@@ -27,6 +32,7 @@ impl Default for Limits {
             max_file_bytes: 256 << 20,
             max_total_bytes: 16 << 30,
             max_image_side: 8192,
+            decode_images: false,
         }
     }
 }

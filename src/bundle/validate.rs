@@ -18,18 +18,69 @@ const MOUNT_ADVICE: &str = "Mounts are metres in the vehicle frame (check the un
 /// Largest tolerated deviation of RᵀR from the identity.
 pub const ROTATION_TOLERANCE: f64 = 1e-3;
 
-/// Checks the manifest against the files in `source`. `progress(done, total)` is
-/// called as files are checked (image decoding dominates the time).
+/// Checks the manifest against the files in `source`: every problem found, and when
+/// there is none, advice on a legal bundle that cannot make a useful map (a vehicle
+/// that does not move, labels with no road, a camera that never sees it: warnings,
+/// not problems). `progress(done, total)` is called as files are checked (image
+/// decoding dominates the time).
 pub fn validate(
     m: &Manifest,
     source: &dyn Source,
     limits: &Limits,
     progress: &mut dyn FnMut(usize, usize),
-) -> Vec<Problem> {
+) -> (Vec<Problem>, Vec<String>) {
     let mut v = Validator::new(source, limits, true);
     v.manifest_fields(m);
     v.files(m, progress);
-    v.problems
+    let advice = if v.problems.is_empty() {
+        advice(m, &v.road_pixels)
+    } else {
+        Vec::new()
+    };
+    (v.problems, advice)
+}
+
+/// Travel below which a drive is taken for a vehicle standing still, metres.
+pub const STILL_M: f64 = 0.5;
+
+/// Warnings for a legal bundle that makes a poor map; `road`: per camera, label
+/// pixels of road classes and all label pixels (empty when labels were not read).
+fn advice(m: &Manifest, road: &std::collections::BTreeMap<String, (u64, u64)>) -> Vec<String> {
+    let mut out = Vec::new();
+    let travel = m.trajectory_length_m();
+    if m.frames.len() > 1 && travel < STILL_M {
+        out.push(format!(
+            "the vehicle moves {travel:.2} m over {} frames: every view is taken from one place, \
+             so the map covers only the ground those views see at a grazing angle; \
+             map a drive that moves (or check that the poses are not all the same)",
+            m.frames.len()
+        ));
+    }
+    let (all_road, all) = road.values().fold((0, 0), |(a, b), &(r, t)| (a + r, b + t));
+    let road_classes: Vec<&str> = m
+        .semantic_classes
+        .iter()
+        .filter(|c| c.role == super::manifest::ClassRole::Road)
+        .map(|c| c.name.as_str())
+        .collect();
+    if all > 0 && all_road == 0 {
+        out.push(format!(
+            "no label pixel is of a road class ({}): nothing is supervised and the map \
+             will be empty; check the labels' values against semantic_classes and their roles",
+            road_classes.join(", ")
+        ));
+    } else if all_road > 0 {
+        for (camera, &(r, t)) in road {
+            if t > 0 && r == 0 {
+                out.push(format!(
+                    "camera {camera} never sees the road in its labels (0 of {t} pixels are of a \
+                     road class): its views only cost time; leave them out, or check its \
+                     labels and its mount"
+                ));
+            }
+        }
+    }
+    out
 }
 
 /// Every check of `validate` but those that read a file's content (images, labels):
@@ -84,6 +135,10 @@ struct Validator<'a> {
     limits: Limits,
     problems: Vec<Problem>,
     class_ids: [bool; 256],
+    /// Classes of the road role (by id).
+    road_ids: [bool; 256],
+    /// Per camera: label pixels of road classes, all label pixels (what was read).
+    road_pixels: std::collections::BTreeMap<String, (u64, u64)>,
     /// Whether images and labels are read (false: presence and sizes only).
     content: bool,
 }
@@ -95,6 +150,8 @@ impl<'a> Validator<'a> {
             limits: *limits,
             problems: Vec::new(),
             class_ids: [false; 256],
+            road_ids: [false; 256],
+            road_pixels: Default::default(),
             content,
         }
     }
@@ -246,6 +303,7 @@ impl<'a> Validator<'a> {
                 );
             }
             self.class_ids[c.id as usize] = true;
+            self.road_ids[c.id as usize] = c.role == super::ClassRole::Road;
             if !names.insert(c.name.as_str()) {
                 self.invalid(
                     format!("semantic_classes[{i}].name"),
@@ -454,6 +512,8 @@ impl<'a> Validator<'a> {
         }
         if present.contains(gt.class_ids.as_str()) {
             self.label(&gt.class_ids, "ground_truth", w, h);
+            // The truth is not a camera: its road pixels say nothing of the labels.
+            self.road_pixels.remove("ground_truth");
         }
     }
 
@@ -463,7 +523,12 @@ impl<'a> Validator<'a> {
             Ok(b) => b,
             Err(p) => return self.problems.push(p),
         };
-        match image_dims(path, &bytes, &self.limits) {
+        let dims = if self.limits.decode_images {
+            decode_rgb(path, &bytes, &self.limits).map(|i| i.dimensions())
+        } else {
+            image_dims(path, &bytes, &self.limits)
+        };
+        match dims {
             Ok((fw, fh)) if (fw, fh) != (w, h) => self.problems.push(Problem::ImageSize {
                 path: path.into(),
                 camera: camera.into(),
@@ -498,12 +563,17 @@ impl<'a> Validator<'a> {
         }
         let mut first = None;
         let mut bad = 0u64;
+        let mut road = 0u64;
         for (x, y, p) in img.enumerate_pixels() {
             if !self.class_ids[p.0[0] as usize] {
                 bad += 1;
                 first.get_or_insert((x, y, p.0[0]));
             }
+            road += self.road_ids[p.0[0] as usize] as u64;
         }
+        let seen = self.road_pixels.entry(camera.to_string()).or_default();
+        seen.0 += road;
+        seen.1 += img.len() as u64;
         if let Some((x, y, value)) = first {
             self.problems.push(Problem::LabelOutOfRange {
                 path: path.into(),

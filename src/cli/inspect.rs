@@ -27,6 +27,8 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
     let limits = Limits {
         max_file_bytes: a.max_file_mib << 20,
         max_image_side: a.max_image_side,
+        // Every image decoded: a truncated or corrupt one is named here, not mid-run.
+        decode_images: true,
         ..Limits::default()
     };
     if a.bundle.extension().is_some_and(|e| e == "rogsmap") {

@@ -76,6 +76,8 @@ pub struct JobFile {
     pub steps: usize,
     /// The seed of the tile's training image order (the plan's `settings.seed`).
     pub seed: u64,
+    /// The run's settings (the plan's): what the job trains with.
+    pub settings: Settings,
     /// The command that runs the job, `{plan}` and `{tiles}` standing for the plan's
     /// folder and the tile outputs' folder.
     pub command: Vec<String>,
@@ -153,6 +155,7 @@ impl PlanFile {
             views: t.views.iter().map(|&(f, v)| [f, v]).collect(),
             steps: r.steps,
             seed: self.settings.seed.unwrap_or(0),
+            settings: self.settings.clone(),
             command: [
                 "rogs",
                 "reconstruct",

@@ -47,11 +47,21 @@ fn to_js<T: Serialize>(v: &T) -> Result<JsValue, JsValue> {
     serde_wasm_bindgen::to_value(v).map_err(|e| JsValue::from_str(&e.to_string()))
 }
 
+/// Dropped bundles up to this size have every image decoded when they are checked.
+const DECODE_ON_DROP_BYTES: usize = 64 << 20;
+
 /// Validates the bytes of a bundle `.zip`: `{status: "valid", summary}` or
 /// `{status: "invalid", problems: [{location, message}]}`.
 #[wasm_bindgen]
 pub fn inspect_bundle(bytes: Vec<u8>) -> Result<JsValue, JsValue> {
-    inspected(Bundle::from_zip_bytes(bytes, Limits::default()))
+    // Every image decoded, as `rogs inspect` does, so a damaged one is named on drop;
+    // past 64 MiB that would hold the page for seconds without progress, and images
+    // are decoded (and a damaged one named) as the run reads them.
+    let limits = Limits {
+        decode_images: bytes.len() <= DECODE_ON_DROP_BYTES,
+        ..Limits::default()
+    };
+    inspected(Bundle::from_zip_bytes(bytes, limits))
 }
 
 /// As `inspect_bundle`, for a bundle read lazily (`www/bundle.js`): its manifest and

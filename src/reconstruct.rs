@@ -55,6 +55,22 @@ pub enum ReconstructError {
         budget: u64,
         resolution: f64,
     },
+    #[error(
+        "camera {camera}'s images are {width}×{height} px: a view's per-pixel buffers would take {mib} MiB, \
+         over this GPU's {limit_mib} MiB per buffer; downscale the images (and intrinsics) to at most {max_px} \
+         pixels, e.g. {fit_w}×{fit_h}",
+        mib = bytes >> 20, limit_mib = limit >> 20
+    )]
+    ImageTooLargeForGpu {
+        camera: String,
+        width: u32,
+        height: u32,
+        bytes: u64,
+        limit: u64,
+        max_px: u64,
+        fit_w: u32,
+        fit_h: u32,
+    },
     /// A tile with no surfels or no view that sees them (skipped by the tiled run).
     #[error("the tile has no surfels or no training view sees them")]
     EmptyTile,
@@ -66,6 +82,35 @@ pub enum ReconstructError {
         #[source]
         source: Box<ReconstructError>,
     },
+}
+
+/// Refuses a camera whose views would not fit the GPU's per-buffer limit, before any
+/// work (a raw buffer error in the middle of a step otherwise).
+pub fn check_cameras_fit(
+    m: &crate::bundle::Manifest,
+    ctx: &GpuContext,
+) -> Result<(), ReconstructError> {
+    let per_px = crate::render::gpu::view_bytes_per_pixel(m.semantic_classes.len().max(1));
+    let limit = ctx.limits.max_storage_buffer_binding_size;
+    for c in &m.cameras {
+        let bytes = c.width as u64 * c.height as u64 * per_px;
+        if bytes > limit {
+            let max_px = limit / per_px;
+            // The same aspect ratio, scaled down to fit.
+            let k = (max_px as f64 / (c.width as f64 * c.height as f64)).sqrt();
+            return Err(ReconstructError::ImageTooLargeForGpu {
+                camera: c.name.clone(),
+                width: c.width,
+                height: c.height,
+                bytes,
+                limit,
+                max_px,
+                fit_w: (c.width as f64 * k).floor() as u32,
+                fit_h: (c.height as f64 * k).floor() as u32,
+            });
+        }
+    }
+    Ok(())
 }
 
 /// Corrects the bundle's poses from its LiDAR when `cfg` asks for it (once per run,
@@ -105,6 +150,7 @@ impl ReconstructError {
         match self {
             Self::Prepare(_) | Self::Bundle(_) | Self::NoViews | Self::EmptyTile => true,
             Self::MapTooLarge { .. } | Self::Checkpoint(_) => true,
+            Self::ImageTooLargeForGpu { .. } => true,
             Self::Gpu(_) | Self::Train(_) => false,
             Self::Tile { source, .. } => source.is_input(),
         }

@@ -346,6 +346,50 @@ fn the_truth_grid_grows_to_cover_every_drive() {
 }
 
 #[test]
+fn a_camera_too_large_for_the_gpu_is_refused_with_the_size_that_fits() {
+    // Once a raw wgpu buffer error mid-step: a camera whose per-pixel buffers exceed
+    // the adapter's binding limit is refused by name, before any work, with a size
+    // that fits. Made just over this adapter's limit, so the test follows the device.
+    let c = ctx();
+    let (mut m, mut files) = rogs::bundle::example::tiny();
+    let per_px = rogs::render::gpu::view_bytes_per_pixel(m.semantic_classes.len());
+    let limit = c.limits.max_storage_buffer_binding_size;
+    let w = 4096u32;
+    let h = (limit / per_px / w as u64 + 8) as u32;
+    assert!(
+        h <= 8192,
+        "this adapter's limit needs a camera past the image limit"
+    );
+    let scale = w as f64 / m.cameras[0].width as f64;
+    let cam = &mut m.cameras[0];
+    (cam.fx, cam.fy, cam.cx, cam.cy) = (
+        cam.fx * scale,
+        cam.fy * scale,
+        w as f64 / 2.0,
+        h as f64 / 2.0,
+    );
+    (cam.width, cam.height) = (w, h);
+    for (p, bytes) in &mut files {
+        if p.starts_with("images/") {
+            *bytes = rogs::bundle::example::png_rgb(&image::RgbImage::new(w, h));
+        } else if p.starts_with("labels/") {
+            *bytes = rogs::bundle::example::png_gray(&image::GrayImage::new(w, h));
+        }
+    }
+    let mut b = bundle(&m, &files);
+    let e = match pollster::block_on(TiledRun::new(&mut b, cfg(), None, c)) {
+        Err(e) => e,
+        Ok(_) => panic!("a {w}×{h} camera must be refused on a {limit}-byte binding"),
+    };
+    assert!(e.is_input(), "{e}");
+    let msg = e.to_string();
+    assert!(
+        msg.contains(&format!("camera front's images are {w}×{h} px")) && msg.contains("downscale"),
+        "{msg}"
+    );
+}
+
+#[test]
 fn a_map_too_large_for_memory_is_refused_with_advice_before_it_is_allocated() {
     // A drive 100 km long at 5 cm: 2 million pixels by the corridor's width, tens
     // of GB of layers. Refused by name before anything map-sized is allocated.

@@ -36,6 +36,13 @@ pub const GUARD_WGSL: &str = include_str!("../../shaders/guard.wgsl");
 /// Floats per pixel of the packed forward outputs (`PIX_STRIDE` in view.wgsl).
 const PIX_STRIDE: usize = 10;
 
+/// Bytes per pixel of a view's largest per-pixel buffer (the packed forward outputs,
+/// or the logits when there are more classes): one storage binding each, so a
+/// camera's pixels times this must fit the adapter's binding limit.
+pub fn view_bytes_per_pixel(channels: usize) -> u64 {
+    4 * PIX_STRIDE.max(channels) as u64
+}
+
 pub struct GpuRasterizer {
     project: wgpu::ComputePipeline,
     scan_blocks: wgpu::ComputePipeline,

@@ -467,6 +467,7 @@ impl TiledRun {
         ctx: GpuContext,
         returns: Option<&[crate::init::align::GroundReturn]>,
     ) -> Result<Self, ReconstructError> {
+        crate::reconstruct::check_cameras_fit(&b.manifest, &ctx)?;
         let t = Instant::now();
         let alignment = align_from(b, &cfg, returns)?;
         let align_ms = t.elapsed().as_secs_f64() * 1e3;

@@ -199,3 +199,47 @@ fn inspect_decodes_every_image_and_names_a_truncated_one() {
     assert!(err.contains(path), "{err}");
     std::fs::remove_file(zip).ok();
 }
+
+#[test]
+fn the_benchmarks_print_json_with_the_keys_scripts_compare() {
+    let (m, files) = rogs::bundle::example::tiny();
+    let zip = temp("bench.zip");
+    std::fs::write(&zip, rogs::bundle::write_zip(&m, &files).expect("zip")).expect("write");
+    let z = zip.to_str().unwrap();
+    for args in [
+        vec![
+            "bench",
+            "step",
+            z,
+            "--steps",
+            "1",
+            "--resolution",
+            "0.1",
+            "--half-width",
+            "3",
+        ],
+        vec!["bench", "raster", z, "--runs", "1", "--resolution", "0.1"],
+    ] {
+        let o = rogs(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(0), "{args:?}: {err}");
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON on stdout");
+        for k in [
+            "seconds_per_step",
+            "seconds_per_epoch",
+            "kernels_ms",
+            "surfels",
+            "candidates_per_view",
+            "pairs",
+        ] {
+            assert!(v.get(k).is_some(), "{args:?}: no {k} in {v}");
+        }
+        assert!(
+            v["seconds_per_step"].as_f64().is_some_and(|s| s > 0.0),
+            "{v}"
+        );
+        assert!(v["surfels"].as_u64().is_some_and(|n| n > 0), "{v}");
+        assert!(v["pairs"].as_f64().is_some_and(|n| n > 0.0), "{v}");
+    }
+    std::fs::remove_file(zip).ok();
+}

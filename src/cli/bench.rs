@@ -12,6 +12,10 @@ pub enum Bench {
     /// The rasteriser on one view of a bundle (its culled surfel set after grid and
     /// initialisation): pixel×surfel pairs per second forward and forward+backward,
     /// median of the runs, wall time around each GPU submission.
+    ///
+    /// Prints JSON, with the keys `bench step` shares for scripts: seconds_per_step
+    /// (one forward and backward pass), kernels_ms (kernel → GPU ms per run),
+    /// surfels, candidates_per_view, pairs.
     Raster {
         /// The scene bundle.
         bundle: PathBuf,
@@ -33,9 +37,13 @@ pub enum Bench {
         #[arg(long)]
         no_subgroup_reduction: bool,
     },
-    /// Optimisation steps of a bundle: wall time per step (median), GPU time per
-    /// kernel from timestamp queries where the adapter has them, the implied time per
-    /// epoch, and GPU bytes per surfel.
+    /// Optimisation steps of a bundle: wall time per step, GPU time per kernel from
+    /// timestamp queries where the adapter has them, the implied time per epoch, and
+    /// GPU bytes per surfel.
+    ///
+    /// Prints JSON: seconds_per_step (mean; seconds_per_step_median too),
+    /// seconds_per_epoch, kernels_ms (kernel → GPU ms per step), surfels,
+    /// candidates_per_view and pairs (means over the timed steps), and more.
     Step {
         /// The scene bundle.
         bundle: PathBuf,

@@ -37,11 +37,13 @@ pub fn run(
     let mut timer = PassTimer::install(&s.trainer.ctx);
     let mut wall = Vec::new();
     let mut cands = Vec::new();
+    let mut pairs = Vec::new();
     while !s.is_done() {
         let t = Instant::now();
         pollster::block_on(s.step(&b)).map_err(|e| e.to_string())?;
         wall.push(t.elapsed().as_secs_f64());
         cands.push(s.trainer.last_candidates());
+        pairs.push(s.trainer.last_pairs() as f64);
         if let Some(timer) = timer.as_mut() {
             pollster::block_on(timer.collect(&s.trainer.ctx)).map_err(|e| e.to_string())?;
         }
@@ -65,6 +67,11 @@ pub fn run(
             serde_json::json!({"kernel": k, "ms_per_step": 1e3 * sec / n, "passes_per_step": passes as f64 / n})
         })
         .collect();
+    // Kernel name → GPU ms per step, for scripts comparing runs.
+    let kernels_ms: serde_json::Map<String, serde_json::Value> = kernels
+        .iter()
+        .filter_map(|k| Some((k["kernel"].as_str()?.to_string(), k["ms_per_step"].clone())))
+        .collect();
     let gpu_ms: f64 = kernels
         .iter()
         .filter_map(|k| k["ms_per_step"].as_f64())
@@ -78,15 +85,18 @@ pub fn run(
         "bundle": bundle.display().to_string(),
         "adapter": s.trainer.ctx.report.name,
         "subgroup_reduction": subgroups,
-        "seconds_per_step_mean": wall.iter().sum::<f64>() / n,
+        "seconds_per_step": wall.iter().sum::<f64>() / n,
+        "seconds_per_step_median": median,
         "surfels": s.prepare_report.surfels,
         "training_views": views,
         "steps_timed": wall.len(),
-        "seconds_per_step": median,
         // An epoch pays for the slow steps too: the mean, not the median.
         "seconds_per_epoch": wall.iter().sum::<f64>() / n * views as f64,
         "gpu_kernel_ms_per_step": if timer.is_some() { serde_json::json!(gpu_ms) } else { serde_json::Value::Null },
+        "kernels_ms": kernels_ms,
         "kernels": kernels,
+        "candidates_per_view": cands.iter().sum::<usize>() as f64 / n,
+        "pairs": pairs.iter().sum::<f64>() / n,
         "bytes_per_surfel_gpu": s.bytes_per_surfel_gpu,
         "candidates_per_view_mean": cands.iter().sum::<usize>() as f64 / n,
         "candidates_per_view_max": cand_max,

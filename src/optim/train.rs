@@ -114,6 +114,8 @@ pub struct Trainer {
     /// `demo` 130–155 k for the front camera, 14–26 k for the side ones); per
     /// candidate it is not stable (the candidates' box holds much that no camera sees).
     pairs_seen: Vec<u32>,
+    /// Surfel–tile pairs of the last view stepped.
+    last_pairs: u32,
     /// Steps run again because their pairs overflowed the capacity.
     pub pair_overflows: usize,
 }
@@ -260,6 +262,7 @@ impl Trainer {
             steps_done: 0,
             position_refreshes: 0,
             pairs_seen: vec![0; cameras.max(1)],
+            last_pairs: 0,
             pair_overflows: 0,
             raster,
             k,
@@ -540,6 +543,7 @@ impl Trainer {
         // Out of memory or a lost device: stop with the words rather than train on.
         ctx.check()?;
         let pairs = sums[tail + 2].to_bits();
+        self.last_pairs = pairs;
         let seen = &mut self.pairs_seen[camera];
         *seen = (*seen).max(pairs);
         if pairs > f.capacity {
@@ -616,6 +620,11 @@ impl Trainer {
     /// Candidates of the last step's view (0 before the first step).
     pub fn last_candidates(&self) -> usize {
         self.last.as_ref().map_or(0, |l| l.1.len())
+    }
+
+    /// Surfel–tile pairs of the last view stepped (what the rasteriser sorted).
+    pub fn last_pairs(&self) -> u32 {
+        self.last_pairs
     }
 
     /// The current parameters, read back.

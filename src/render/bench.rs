@@ -131,6 +131,19 @@ pub async fn raster_view(
             "kernels_s_total": t.sorted(),
         })),
         "runs": o.runs.max(1),
+        // The keys `rogs bench step` shares, for scripts comparing runs: a step here
+        // is one forward and backward pass of the view (median); no epoch.
+        "seconds_per_step": tb,
+        "seconds_per_epoch": serde_json::Value::Null,
+        "surfels": all.len(),
+        "candidates_per_view": sub.len(),
+        "pairs": pairs,
+        // Kernel name → GPU ms per run (a forward pass, then a forward and backward).
+        "kernels_ms": timer.as_ref().map(|t| t
+            .sorted()
+            .into_iter()
+            .map(|(k, sec, _)| (k.to_string(), serde_json::json!(1e3 * sec / o.runs.max(1) as f64)))
+            .collect::<serde_json::Map<_, _>>()),
     }))
 }
 

@@ -5,7 +5,7 @@
 
 use rogs::gpu::GpuContext;
 use rogs::loss::regularise::{regularise, RegWeights};
-use rogs::optim::check::compare_step;
+use rogs::optim::check::{compare_pose_grad, compare_step};
 
 /// With every moment in one binding, and in windows of 3 blocks of 256 surfels (3
 /// `adam` passes, the last one partial, as a model larger than one binding takes); step 2 sized from step 1's pair count, and
@@ -18,6 +18,29 @@ fn gpu_step_matches_the_oracles() {
         let d = pollster::block_on(compare_step(ctx, window, margin)).expect("gpu step");
         assert_eq!(d.pair_overflows, [0, overflows], "{d:#?}");
         check_step(d);
+    }
+}
+
+/// The pose gradient `pose_grad` reduces on the GPU against the CPU chain.
+#[test]
+fn gpu_pose_gradient_matches_the_oracle() {
+    let ctx =
+        GpuContext::new_blocking().unwrap_or_else(|e| panic!("GPU tests need an adapter: {e}"));
+    let (gpu, cpu) = pollster::block_on(compare_pose_grad(ctx)).expect("gpu step");
+    check_pose_grad(gpu, cpu);
+}
+
+pub fn check_pose_grad(gpu: [f64; 6], cpu: [f64; 6]) {
+    eprintln!("pose gradient GPU {gpu:?}\n              CPU {cpu:?}");
+    let scale = cpu.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    assert!(scale > 0.0, "the pose gradient must not vanish");
+    for k in 0..6 {
+        assert!(
+            (gpu[k] - cpu[k]).abs() <= 2e-3 * scale,
+            "axis {k}: GPU {} vs CPU {} (largest {scale})",
+            gpu[k],
+            cpu[k]
+        );
     }
 }
 

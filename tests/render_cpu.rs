@@ -95,6 +95,13 @@ fn cpu_backward_matches_finite_differences_for_every_parameter_group() {
             Box::new(|g, i, _| g.pos[i][2]),
             Box::new(|p, i, _, d| p.pos[i][2] += d),
         ),
+        // x and y are not learnt, but the pose gradient is built on them.
+        (
+            "xy",
+            2,
+            Box::new(|g, i, k| g.pos[i][k]),
+            Box::new(|p, i, k, d| p.pos[i][k] += d),
+        ),
         (
             "rgb",
             3,
@@ -172,6 +179,129 @@ fn cpu_backward_matches_finite_differences_for_every_parameter_group() {
         );
         report.push(format!("{name}: worst rel {worst:.1e}"));
     }
+    eprintln!("{}", report.join("\n"));
+}
+
+/// The world moved by the inverse of a pose correction: what the corrected camera
+/// sees (rotation −ω about `centre`, translation −τ), in f64.
+fn world_moved(
+    p: &Params<f64>,
+    c: &rogs::optim::pose::Correction,
+    centre: [f64; 3],
+) -> Params<f64> {
+    let r = rogs::bundle::transform::exp_so3(c.omega);
+    let th = (c.omega.iter().map(|v| v * v).sum::<f64>()).sqrt();
+    // Quaternion of R(−ω) = exp(−ω).
+    let (s, w) = ((th / 2.0).sin(), (th / 2.0).cos());
+    let a = if th > 0.0 {
+        c.omega.map(|v| -v / th * s)
+    } else {
+        [0.0; 3]
+    };
+    let mut out = p.clone();
+    for (q, o) in p.pos.iter().zip(out.pos.iter_mut()) {
+        let d = [0, 1, 2].map(|k| q[k] - centre[k] - c.tau[k]);
+        // Rᵀ d + centre.
+        *o = [0, 1, 2].map(|i| (0..3).map(|k| r[k][i] * d[k]).sum::<f64>() + centre[i]);
+    }
+    for (q, o) in p.rotation.iter().zip(out.rotation.iter_mut()) {
+        let (bw, bv) = (q[0], [q[1], q[2], q[3]]);
+        let cr = [
+            a[1] * bv[2] - a[2] * bv[1],
+            a[2] * bv[0] - a[0] * bv[2],
+            a[0] * bv[1] - a[1] * bv[0],
+        ];
+        let dot = a[0] * bv[0] + a[1] * bv[1] + a[2] * bv[2];
+        *o = [
+            w * bw - dot,
+            w * bv[0] + bw * a[0] + cr[0],
+            w * bv[1] + bw * a[1] + cr[1],
+            w * bv[2] + bw * a[2] + cr[2],
+        ];
+    }
+    out
+}
+
+/// The pose gradient (`optim::pose::gradient`, from the surfels' gradients) against
+/// central differences of the loss with the world moved by the inverse correction
+/// (f64), every axis of ω and τ, about a vehicle centre away from the camera; and the
+/// corrected camera (`Correction::apply`, what training renders) against that moved
+/// world: the same image. (Differences of the camera itself are too coarse to check
+/// against: its matrix is f32, and at steps above f32's rounding some surfel of the
+/// view always crosses the edge of its tile box.)
+#[test]
+fn pose_gradient_matches_finite_differences_and_the_moved_camera_the_moved_world() {
+    use rogs::optim::pose::{gradient, Correction};
+    let ch = 3;
+    let cam = road_camera(40, 32, 12.0);
+    let p = road_patch(8, 8, 0.25, -1.0, 3.0, ch, 5);
+    let loss = Loss::new(&cam, ch);
+    let f = render(&p, &cam, &CullConfig::default());
+    let (vg, _) = backward(&p, &cam, &f, &loss.g);
+    let g = project_backward::backward(&p, &cam, &vg);
+    // The vehicle stands off to one side of the camera and below it: rotations about
+    // it also move the camera.
+    let centre = [0.4, -1.5, -1.2];
+    let analytic = gradient(&p, &g, centre);
+    let scale = analytic.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    assert!(scale > 0.0, "the pose gradient is zero");
+    let axis = |k: usize, d: f64| {
+        let mut c = Correction::default();
+        if k < 3 {
+            c.omega[k] = d;
+        } else {
+            c.tau[k - 3] = d;
+        }
+        c
+    };
+    // A tilt about x of 1e-6 already takes a surfel of this patch across the edge of
+    // its tile box (a jump in the loss); 1e-7 stays clear of it.
+    let h = 1e-7;
+    let mut report = Vec::new();
+    for k in 0..6 {
+        let moved = |d: f64| loss.eval(&world_moved(&p, &axis(k, d), centre), &cam);
+        let numeric = (moved(h) - moved(-h)) / (2.0 * h);
+        let rel = (analytic[k] - numeric).abs() / numeric.abs().max(analytic[k].abs());
+        report.push(format!(
+            "axis {k}: analytic {:.4e} numeric {numeric:.4e} rel {rel:.1e}",
+            analytic[k]
+        ));
+        assert!(
+            rel < 1e-4,
+            "pose axis {k}: analytic {:e} numeric {numeric:e} (rel {rel:.3e})",
+            analytic[k]
+        );
+    }
+    // A finite correction (2 cm, 5 cm, −3 cm; 0.5°, −0.3°, 1°): camera moved against
+    // world moved.
+    let c = Correction {
+        omega: [0.5f64, -0.3, 1.0].map(f64::to_radians),
+        tau: [0.02, 0.05, -0.03],
+    };
+    let a = render(&p, &c.apply(&cam, centre), &CullConfig::default());
+    let b = render(&world_moved(&p, &c, centre), &cam, &CullConfig::default());
+    let moved_px = a
+        .image
+        .rgb
+        .iter()
+        .zip(&f.image.rgb)
+        .filter(|(x, y)| (*x - *y).abs() > 1e-2)
+        .count();
+    assert!(
+        moved_px > 50,
+        "the correction must change the image ({moved_px} values)"
+    );
+    let diff = a
+        .image
+        .rgb
+        .iter()
+        .zip(&b.image.rgb)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max);
+    report.push(format!(
+        "camera moved vs world moved: max |Δrgb| {diff:.1e}"
+    ));
+    assert!(diff < 1e-3, "camera moved vs world moved: {diff:e}");
     eprintln!("{}", report.join("\n"));
 }
 

@@ -253,7 +253,7 @@ impl Drop for Output {
 
 /// A rigid transform from a row-major 3×3 rotation and a translation.
 pub(crate) fn rigid(r: [[f64; 3]; 3], t: [f64; 3]) -> Mat4Rows {
-    crate::synth::rig::mat(r, t)
+    crate::bundle::transform::mat(r, t)
 }
 
 pub(crate) use crate::synth::rig::{apply, inverse, mul};

@@ -255,3 +255,37 @@ pub async fn missed_candidate(ctx: GpuContext) -> Result<MissedCandidate, GpuErr
         gpu_z,
     })
 }
+
+/// The pose gradient of one step on the GPU (`pose_grad` after `project_backward`)
+/// against the CPU chain (rasteriser oracle, loss, `optim::pose::gradient`): (GPU, CPU)
+/// dL/d(ω, τ) about a vehicle centre off to one side of the camera.
+pub async fn compare_pose_grad(ctx: GpuContext) -> Result<([f64; 6], [f64; 6]), GpuError> {
+    let ch = 4;
+    let (p0, mut cam) = test_scene(ch);
+    cam.exposure = [0.0, 0.0];
+    let n = p0.len();
+    let mut rng = Rng::new(17);
+    let z: Vec<f32> = p0.pos.iter().map(|q| q[2]).collect();
+    let reg = reg_data(n, &z, &mut rng);
+    let mut cfg = TrainConfig::default();
+    cfg.loss.min_alpha = 0.2;
+    let npx = (cam.width * cam.height) as usize;
+    let target: Vec<u32> = (0..npx)
+        .map(|_| (rng.next_u64() & 0xff_ffff) as u32 | ((rng.next_u64() % ch as u64) as u32) << 24)
+        .collect();
+    let mut t = Trainer::new(ctx, &p0, &reg, 1, &cfg, 10.0, 4)
+        .await
+        .map_err(|e| GpuError::Validation(e.to_string()))?;
+    let centre = [0.5f32, -2.0, -1.5];
+    let f = render(&p0, &cam, &cfg.cull);
+    let (_, og) = photometric(&f.image, &target, &cfg.loss, 1.0 / npx as f32);
+    let (vg, _) = rasterize_backward::backward(&p0, &cam, &f, &og);
+    let g = project_backward::backward(&p0, &cam, &vg);
+    let cpu = super::pose::gradient(&p0, &g, centre.map(|v| v as f64));
+    let (_, gpu) = t
+        .step_with_pose(&cam, 0, &target, npx, Some(centre))
+        .await
+        .map_err(|e| GpuError::Validation(e.to_string()))?;
+    let gpu = gpu.ok_or_else(|| GpuError::Validation("no pose gradient".into()))?;
+    Ok((gpu, cpu))
+}

@@ -4,6 +4,7 @@
 
 pub mod adam;
 pub mod check;
+pub mod pose;
 pub mod train;
 
 use crate::bundle::Manifest;

@@ -19,6 +19,7 @@
 //! kept.
 
 use super::adam::{learnable, StepConstants};
+use super::pose::{PoseGrad, PosePartials};
 use super::TrainConfig;
 use crate::gpu::buffers::{
     bind, bind_ranges, bytes_of, dispatch, init_storage, pipeline, storage, uniform, window,
@@ -74,6 +75,7 @@ struct Kernels {
     regularise: wgpu::ComputePipeline,
     adam: wgpu::ComputePipeline,
     exposure: wgpu::ComputePipeline,
+    pose: PoseGrad,
 }
 
 pub struct Trainer {
@@ -122,7 +124,8 @@ pub struct Trainer {
 
 /// What one try of a step ended with.
 enum Try {
-    Done(StepLoss),
+    /// The loss, and the pose gradient when it was asked for.
+    Done(StepLoss, Option<[f64; 6]>),
     /// The pairs overflowed the capacity; nothing was applied.
     Overflow,
 }
@@ -239,6 +242,7 @@ impl Trainer {
             ),
             adam: pipeline(&ctx, "adam", &adam_src, "main"),
             exposure: pipeline(&ctx, "adam_exposure", &adam_src, "step_exposure"),
+            pose: PoseGrad::new(&ctx),
         };
         let n = p.len() as u64;
         let slots = learnable(p.channels) as u32;
@@ -314,15 +318,32 @@ impl Trainer {
         target: &[u32],
         mask_count: usize,
     ) -> Result<StepLoss, TrainError> {
+        Ok(self
+            .step_with_pose(cam, camera, target, mask_count, None)
+            .await?
+            .0)
+    }
+
+    /// `step`, and with `pose_centre` (the view's vehicle position, local frame) also
+    /// the rendering loss's gradient with respect to a correction of the view's
+    /// vehicle pose about it (`optim::pose`), dL/d(ω, τ).
+    pub async fn step_with_pose(
+        &mut self,
+        cam: &ViewCamera,
+        camera: usize,
+        target: &[u32],
+        mask_count: usize,
+        pose_centre: Option<[f32; 3]>,
+    ) -> Result<(StepLoss, Option<[f64; 6]>), TrainError> {
         let target = init_storage(&self.ctx, "target", bytes_of(target));
         let camera = camera.min(self.cameras.saturating_sub(1));
         let mut capacity = self.pair_capacity(camera);
         loop {
             match self
-                .try_step(cam, camera, &target, mask_count, capacity)
+                .try_step(cam, camera, &target, mask_count, capacity, pose_centre)
                 .await?
             {
-                Try::Done(loss) => return Ok(loss),
+                Try::Done(loss, pose) => return Ok((loss, pose)),
                 Try::Overflow => {
                     self.pair_overflows += 1;
                     capacity = None;
@@ -347,6 +368,7 @@ impl Trainer {
         target: &wgpu::Buffer,
         mask_count: usize,
         capacity: Option<u32>,
+        pose_centre: Option<[f32; 3]>,
     ) -> Result<Try, TrainError> {
         let ctx = &self.ctx;
         let ch = self.params.channels;
@@ -419,6 +441,14 @@ impl Trainer {
             &self.status,
         );
         let stride = VIEW_GRAD as u32 + ch;
+        // Before `adam` reads the slots (it does not write them, but keep the order
+        // the header of pose_grad.wgsl states).
+        let pose = pose_centre.map(|c| {
+            self.k
+                .pose
+                .encode(ctx, &mut enc, &self.params, &f, &view_grad, stride, c)
+        });
+        let pose_floats = pose.as_ref().map_or(0, |p| 6 * p.groups);
         let (sg, srow) = grid_1d(ctx, n.div_ceil(REGULARISE_PER));
         let w = &self.reg;
         let rp: [u32; 8] = [
@@ -436,7 +466,11 @@ impl Trainer {
         // Read back at the end: the regulariser's partial sums, the two status words,
         // the pair count and the loss's partial sums.
         let tail = 3 * swgs;
-        let readback = storage(ctx, "step_readback", 4 * (tail + 3 + 2 * wgs) as u64);
+        let readback = storage(
+            ctx,
+            "step_readback",
+            4 * (tail + 3 + 2 * wgs + pose_floats) as u64,
+        );
         let bg = bind(
             ctx,
             &self.k.regularise,
@@ -538,8 +572,13 @@ impl Trainer {
         enc.copy_buffer_to_buffer(&self.status, 0, &readback, at(tail), 8);
         enc.copy_buffer_to_buffer(&f.total, 0, &readback, at(tail + 2), 4);
         enc.copy_buffer_to_buffer(&partial, 0, &readback, at(tail + 3), at(2 * wgs));
+        let pose_at = tail + 3 + 2 * wgs;
+        if let Some(p) = &pose {
+            enc.copy_buffer_to_buffer(&p.buffer, 0, &readback, at(pose_at), at(pose_floats));
+        }
         ctx.queue.submit([enc.finish()]);
-        let sums = read_f32(ctx, &readback, tail + 3 + 2 * wgs).await?;
+        let sums = read_f32(ctx, &readback, pose_at + pose_floats).await?;
+        let pose = pose.map(|_| PosePartials::sum(&sums[pose_at..]));
         // Out of memory or a lost device: stop with the words rather than train on.
         ctx.check()?;
         let pairs = sums[tail + 2].to_bits();
@@ -551,7 +590,7 @@ impl Trainer {
         }
         self.last = Some((view_grad, f.cand));
         let mut loss = StepLoss::default();
-        for s in sums[tail + 3..].chunks_exact(2) {
+        for s in sums[tail + 3..pose_at].chunks_exact(2) {
             loss.rgb += s[0] as f64;
             loss.ce += s[1] as f64;
         }
@@ -588,7 +627,7 @@ impl Trainer {
                 what: "the loss",
             });
         }
-        Ok(Try::Done(loss))
+        Ok(Try::Done(loss, pose))
     }
 
     /// Reads the positions back into the host's copy that candidate lists use.

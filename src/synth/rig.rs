@@ -3,20 +3,11 @@
 use super::raycast::{Hit, Scene};
 use super::rng::Rng;
 use super::world::World;
-pub use crate::bundle::transform::{apply, inverse, mul};
+pub use crate::bundle::transform::{apply, exp_so3, inverse, mat, mul};
 use crate::bundle::Mat4Rows;
 
 /// Lateral offset of the vehicle from the centreline: the right-hand lane.
 pub const LANE_T: f64 = -1.75;
-
-pub fn mat(r: [[f64; 3]; 3], t: [f64; 3]) -> Mat4Rows {
-    [
-        [r[0][0], r[0][1], r[0][2], t[0]],
-        [r[1][0], r[1][1], r[1][2], t[1]],
-        [r[2][0], r[2][1], r[2][2], t[2]],
-        [0.0, 0.0, 0.0, 1.0],
-    ]
-}
 
 fn normalize(v: [f64; 3]) -> [f64; 3] {
     let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
@@ -72,25 +63,6 @@ pub fn camera_to_vehicle(yaw_deg: f64, pitch_deg: f64, pos: [f64; 3]) -> Mat4Row
     m[1][3] = pos[1];
     m[2][3] = pos[2];
     m
-}
-
-/// Rodrigues: rotation matrix of the axis-angle vector w (radians).
-pub fn exp_so3(w: [f64; 3]) -> [[f64; 3]; 3] {
-    let th = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
-    if th < 1e-15 {
-        return [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-    }
-    let k = w.map(|v| v / th);
-    let (s, c) = (th.sin(), th.cos());
-    let mut r = [[0.0; 3]; 3];
-    for (i, row) in r.iter_mut().enumerate() {
-        for (j, v) in row.iter_mut().enumerate() {
-            let kk = [[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]];
-            let k2: f64 = (0..3).map(|m| kk[i][m] * kk[m][j]).sum();
-            *v = if i == j { 1.0 } else { 0.0 } + s * kk[i][j] + (1.0 - c) * k2;
-        }
-    }
-    r
 }
 
 /// Pose noise settings: per-frame Gaussian translation (m, each axis) and rotation

@@ -81,11 +81,11 @@ impl Correction {
         let d = crate::bundle::transform::inverse(&self.delta(centre));
         let w = cam.world_to_cam.map(|r| r.map(|v| v as f64));
         let mut out = *cam;
-        for i in 0..3 {
-            for j in 0..4 {
-                let lin: f64 = (0..3).map(|k| w[i][k] * d[k][j]).sum();
-                out.world_to_cam[i][j] = (lin + if j == 3 { w[i][3] } else { 0.0 }) as f32;
-            }
+        for (row, wr) in out.world_to_cam.iter_mut().zip(&w) {
+            *row = [0, 1, 2, 3].map(|j| {
+                let lin: f64 = (0..3).map(|k| wr[k] * d[k][j]).sum();
+                (lin + if j == 3 { wr[3] } else { 0.0 }) as f32
+            });
         }
         out
     }

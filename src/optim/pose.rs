@@ -19,6 +19,7 @@ use crate::gpu::buffers::{bind, dispatch, pipeline, storage, uniform};
 use crate::gpu::GpuContext;
 use crate::render::gpu::{GpuForward, GpuParams};
 use crate::render::project_backward::Grads;
+use crate::render::rasterize_backward::VIEW_GRAD;
 use crate::render::real::Real;
 use crate::render::{Params, ViewCamera};
 use serde::{Deserialize, Serialize};
@@ -167,7 +168,7 @@ impl PoseGrad {
     }
 
     /// Reduces the view's parameter gradients (`view_grad` after `project_backward`,
-    /// slots of `stride` floats) to partial sums of dL/d(ω, τ) about `centre`.
+    /// `VIEW_GRAD + channels` floats per slot) to partial sums of dL/d(ω, τ) about `centre`.
     pub fn encode(
         &self,
         ctx: &GpuContext,
@@ -175,10 +176,10 @@ impl PoseGrad {
         p: &GpuParams,
         f: &GpuForward,
         view_grad: &wgpu::Buffer,
-        stride: u32,
         centre: [f32; 3],
     ) -> PosePartials {
         let n = f.cand.len() as u32;
+        let stride = VIEW_GRAD as u32 + f.channels;
         let (gx, gy) = ctx.dispatch_2d(n.div_ceil(WG));
         let mut u: Vec<u32> = centre.iter().map(|v| v.to_bits()).collect();
         u.extend([0, n, gx * WG, stride, 0]);

@@ -446,7 +446,7 @@ impl Trainer {
         let pose = pose_centre.map(|c| {
             self.k
                 .pose
-                .encode(ctx, &mut enc, &self.params, &f, &view_grad, stride, c)
+                .encode(ctx, &mut enc, &self.params, &f, &view_grad, c)
         });
         let pose_floats = pose.as_ref().map_or(0, |p| 6 * p.groups);
         let (sg, srow) = grid_1d(ctx, n.div_ceil(REGULARISE_PER));

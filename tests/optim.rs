@@ -34,12 +34,10 @@ pub fn check_pose_grad(gpu: [f64; 6], cpu: [f64; 6]) {
     eprintln!("pose gradient GPU {gpu:?}\n              CPU {cpu:?}");
     let scale = cpu.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     assert!(scale > 0.0, "the pose gradient must not vanish");
-    for k in 0..6 {
+    for (k, (g, c)) in gpu.iter().zip(&cpu).enumerate() {
         assert!(
-            (gpu[k] - cpu[k]).abs() <= 2e-3 * scale,
-            "axis {k}: GPU {} vs CPU {} (largest {scale})",
-            gpu[k],
-            cpu[k]
+            (g - c).abs() <= 2e-3 * scale,
+            "axis {k}: GPU {g} vs CPU {c} (largest {scale})"
         );
     }
 }

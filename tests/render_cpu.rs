@@ -258,18 +258,18 @@ fn pose_gradient_matches_finite_differences_and_the_moved_camera_the_moved_world
     // its tile box (a jump in the loss); 1e-7 stays clear of it.
     let h = 1e-7;
     let mut report = Vec::new();
-    for k in 0..6 {
+    for (k, &a) in analytic.iter().enumerate() {
         let moved = |d: f64| loss.eval(&world_moved(&p, &axis(k, d), centre), &cam);
         let numeric = (moved(h) - moved(-h)) / (2.0 * h);
-        let rel = (analytic[k] - numeric).abs() / numeric.abs().max(analytic[k].abs());
+        let rel = (a - numeric).abs() / numeric.abs().max(a.abs());
         report.push(format!(
             "axis {k}: analytic {:.4e} numeric {numeric:.4e} rel {rel:.1e}",
-            analytic[k]
+            a
         ));
         assert!(
             rel < 1e-4,
             "pose axis {k}: analytic {:e} numeric {numeric:e} (rel {rel:.3e})",
-            analytic[k]
+            a
         );
     }
     // A finite correction (2 cm, 5 cm, −3 cm; 0.5°, −0.3°, 1°): camera moved against

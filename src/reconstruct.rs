@@ -15,6 +15,7 @@ use crate::init::prepare::{lidar_world_of, prepare, PrepareConfig, PrepareError,
 use crate::init::{PoseIndex, PosePlanes};
 use crate::loss::regularise::RegData;
 use crate::loss::targets;
+use crate::optim::pose::PoseRefiner;
 use crate::optim::train::{read_params, StepLoss, TrainError, Trainer};
 use crate::optim::{epoch_order, is_holdout, scene_extent, split_views, TrainConfig, ViewRef};
 use crate::render::from_bundle::{local_origin, params, view_camera};
@@ -184,6 +185,8 @@ pub struct ReconstructConfig {
     /// Correct each frame's height, roll and pitch from its LiDAR sweep before
     /// anything uses the poses (when the LiDAR is in use); `None` keeps them.
     pub align: Option<AlignConfig>,
+    /// Photometric pose refinement during training (`optim::pose`); `None`: off.
+    pub poses: Option<crate::optim::pose::PoseConfig>,
 }
 
 impl Default for ReconstructConfig {
@@ -197,6 +200,7 @@ impl Default for ReconstructConfig {
             train: TrainConfig::default(),
             baseline_ipm: false,
             align: Some(AlignConfig::default()),
+            poses: None,
         }
     }
 }
@@ -246,6 +250,9 @@ pub struct Session {
     pub edges: usize,
     /// What the pose alignment did, when it ran.
     pub alignment: Option<AlignSummary>,
+    /// Per-frame pose corrections, when refinement is on (a tiled run hands them
+    /// from tile to tile, so that a frame seen by two tiles has one correction).
+    pub poses: Option<PoseRefiner>,
 }
 
 /// Dense channel and class id of every road class (the BEV semantic layer's choices).
@@ -380,6 +387,11 @@ impl Session {
             with_lidar: reg.with_lidar,
             edges: reg.edges,
             alignment: None,
+            poses: cfg
+                .poses
+                .clone()
+                .filter(|_| !cfg.baseline_ipm)
+                .map(|c| PoseRefiner::new(m.frames.len(), c)),
             prepare_report: prepared.report,
             level: prepared.grid.level.clone(),
             grid: prepared.grid,
@@ -434,12 +446,34 @@ impl Session {
         let t = Instant::now();
         let v = self.train_views[self.order[self.steps_done()]];
         let (target, count) = self.target(b, &v)?;
-        let cam = view_camera(&b.manifest, v.frame, v.view, self.origin, [0.0, 0.0])
+        let mut cam = view_camera(&b.manifest, v.frame, v.view, self.origin, [0.0, 0.0])
             .ok_or(ReconstructError::NoViews)?;
-        let r = self.trainer.step(&cam, v.camera, &target, count).await;
+        // With refinement: the view from the frame's corrected pose, and from the
+        // start step on, the gradient about the corrected vehicle position.
+        let mut pose_centre = None;
+        let mut progress = 0.0;
+        if let Some(r) = &self.poses {
+            let c = r.correction(v.frame);
+            let x = &b.manifest.frames[v.frame].vehicle_to_world;
+            let at = [0, 1, 2].map(|k| x[k][3] - self.origin[k]);
+            cam = c.apply(&cam, at);
+            let start = (r.cfg.start * self.total_steps() as f64).floor() as usize;
+            if self.steps_done() >= start {
+                pose_centre = Some([0, 1, 2].map(|k| (at[k] + c.tau[k]) as f32));
+                let left = self.total_steps().saturating_sub(start).max(1);
+                progress = (self.steps_done() - start) as f64 / left as f64;
+            }
+        }
+        let r = self
+            .trainer
+            .step_with_pose(&cam, v.camera, &target, count, pose_centre)
+            .await;
         self.timings.train_ms += t.elapsed().as_secs_f64() * 1e3;
         match r {
-            Ok(l) => {
+            Ok((l, pose)) => {
+                if let (Some(r), Some(g)) = (&mut self.poses, pose) {
+                    r.update(v.frame, g, progress);
+                }
                 self.losses.push(l);
                 Ok(Some(l))
             }

@@ -72,6 +72,20 @@ pub struct Settings {
     /// step as a lost device would.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fault_tile: Option<usize>,
+    /// Photometric pose refinement (`optim::pose`); default false.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub refine_poses: Option<bool>,
+    /// Its learning rates: metres and degrees per step.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pose_lr_m: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pose_lr_deg: Option<f64>,
+    /// Fraction of the steps before the poses start to move (0 to 1).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pose_start: Option<f64>,
+    /// Refine x, y and yaw only; default: when the poses are aligned to the LiDAR.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pose_planar: Option<bool>,
 }
 
 /// What a front end uses where a setting is absent.
@@ -164,6 +178,33 @@ impl Settings {
         if self.align == Some(false) {
             c.align = None;
         }
+        if self.refine_poses == Some(true) {
+            let mut p = crate::optim::pose::PoseConfig::default();
+            let num = |name: &str, v: Option<f64>, ex: &str| match positive(name, v, ex)? {
+                Some(x) if !x.is_finite() => Err(format!("{name}: expected a finite number")),
+                o => Ok(o),
+            };
+            if let Some(v) = num("pose_lr_m", self.pose_lr_m, "0.005 (metres per step)")? {
+                p.lr_translation_m = v;
+            }
+            if let Some(v) = num("pose_lr_deg", self.pose_lr_deg, "0.05 (degrees per step)")? {
+                p.lr_rotation_deg = v;
+            }
+            match self.pose_start {
+                Some(v) if !(0.0..1.0).contains(&v) => {
+                    return Err(format!(
+                        "pose_start {v}: expected a fraction of the steps from 0 up to (not including) 1, such as 0.25"
+                    ))
+                }
+                Some(v) => p.start = v,
+                None => {}
+            }
+            // Where the LiDAR alignment fixes height, roll and pitch, the images
+            // refine what it cannot see.
+            let aligned = c.align.is_some() && lidar && m.lidar.is_some();
+            p.planar = self.pose_planar.unwrap_or(aligned);
+            c.poses = Some(p);
+        }
         Ok(c)
     }
 
@@ -234,6 +275,11 @@ mod tests {
             (r#"{"init": "best"}"#, "init \"best\""),
             (r#"{"epochs": 0}"#, "epochs 0"),
             (r#"{"baseline": "rome"}"#, "baseline \"rome\""),
+            (
+                r#"{"refine_poses": true, "pose_start": 1.5}"#,
+                "pose_start 1.5",
+            ),
+            (r#"{"refine_poses": true, "pose_lr_m": 0}"#, "pose_lr_m 0"),
         ] {
             let s: Settings = serde_json::from_str(json).expect("settings");
             let e = s.config(&m, PAGE).expect_err(json);

@@ -129,6 +129,25 @@ async fn optimisation_step_matches_the_oracles_in_the_browser() {
 }
 
 #[wasm_bindgen_test]
+async fn pose_gradient_matches_the_oracle_in_the_browser() {
+    let ctx = match GpuContext::new().await {
+        Ok(c) => c,
+        Err(e) => panic!("WebGPU adapter required: {e}"),
+    };
+    let (gpu, cpu) = rogs::optim::check::compare_pose_grad(ctx)
+        .await
+        .expect("gpu step");
+    let scale = cpu.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    assert!(scale > 0.0, "the pose gradient must not vanish");
+    for (k, (g, c)) in gpu.iter().zip(&cpu).enumerate() {
+        assert!(
+            (g - c).abs() <= 2e-3 * scale,
+            "axis {k}: GPU {g} vs CPU {c}"
+        );
+    }
+}
+
+#[wasm_bindgen_test]
 async fn a_surfel_the_candidate_list_missed_is_found_in_the_browser() {
     let ctx = match GpuContext::new().await {
         Ok(c) => c,

@@ -30,6 +30,7 @@ function settings() {
     epochs: Number($('set-epochs').value),
     lidar: $('set-lidar').checked,
     align: $('set-align').checked,
+    ...($('set-refine-poses').checked ? { refine_poses: true } : {}),
     adaptive: $('set-adaptive').checked,
     init: $('set-init').value,
     half_width: Number($('set-half-width').value) || 4,

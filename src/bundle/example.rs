@@ -150,6 +150,7 @@ pub fn tiny() -> (Manifest, Vec<BundleFile>) {
             class_ids: "truth/class_ids.png".into(),
             elevation: "truth/elevation.f32".into(),
             valid: "truth/valid.png".into(),
+            poses: None,
         }),
         world_frame: None,
         corridor_half_width_m: None,

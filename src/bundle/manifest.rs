@@ -147,6 +147,10 @@ pub struct GroundTruth {
     pub elevation: String,
     /// 8-bit PNG, non-zero where the truth is valid.
     pub valid: String,
+    /// Optional JSON file: every frame's exact `vehicle_to_world` (an array of
+    /// row-major 4×4 matrices, one per frame in order), for scoring pose refinement.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub poses: Option<String>,
 }
 
 impl Manifest {

@@ -253,6 +253,8 @@ impl Bundle {
                     for p in [&mut g.rgb, &mut g.class_ids, &mut g.elevation, &mut g.valid] {
                         *p = format!("{prefix}{p}");
                     }
+                    // One drive's exact poses do not number the merged frames.
+                    g.poses = None;
                     g
                 });
             }

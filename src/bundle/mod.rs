@@ -217,6 +217,36 @@ impl Bundle {
             .collect())
     }
 
+    /// The exact poses of `ground_truth.poses` (synthetic bundles), one per frame;
+    /// `Ok(None)` when the bundle has none.
+    pub fn read_true_poses(&self) -> Result<Option<Vec<Mat4Rows>>, Problem> {
+        let Some(path) = self
+            .manifest
+            .ground_truth
+            .as_ref()
+            .and_then(|g| g.poses.as_deref())
+        else {
+            return Ok(None);
+        };
+        let field = "ground_truth.poses".to_string();
+        let poses: Vec<Mat4Rows> =
+            serde_json::from_slice(&self.read(path)?).map_err(|e| Problem::ManifestField {
+                field: field.clone(),
+                what: format!("{path}: {e}; expected an array of row-major 4×4 matrices"),
+            })?;
+        if poses.len() != self.manifest.frames.len() {
+            return Err(Problem::ManifestField {
+                field,
+                what: format!(
+                    "{path} holds {} poses, expected one per frame ({})",
+                    poses.len(),
+                    self.manifest.frames.len()
+                ),
+            });
+        }
+        Ok(Some(poses))
+    }
+
     /// The index of the drive that frame `frame` belongs to.
     pub fn drive_of(&self, frame: usize) -> usize {
         self.drives

@@ -44,6 +44,7 @@ fn filled(m: &Manifest) -> Manifest {
         class_ids: String::new(),
         elevation: String::new(),
         valid: String::new(),
+        poses: None,
     });
     f.world_frame.get_or_insert(WorldFrame {
         name: String::new(),

@@ -131,6 +131,30 @@ pub struct SettingsArgs {
     /// tiles' layers are blended over twice this width.
     #[arg(long, default_value_t = DEFAULT_OVERLAP_M, value_parser = non_negative_m64)]
     tile_overlap_m: f64,
+    /// Photometric pose refinement: learn a correction of every frame's vehicle pose
+    /// (x, y, z, roll, pitch, yaw) with the map, from the images. Worth it when the
+    /// poses are noisy by more than a BEV pixel; give it a few epochs (--epochs 3),
+    /// since each frame is corrected once per view it has per epoch. Writes
+    /// poses_refined.json.
+    #[arg(long)]
+    refine_poses: bool,
+    /// Its learning rate of translation, metres per step (default 0.01).
+    #[arg(long, requires = "refine_poses")]
+    pose_lr_m: Option<f64>,
+    /// Its learning rate of rotation, degrees per step (default 0.1).
+    #[arg(long, requires = "refine_poses")]
+    pose_lr_deg: Option<f64>,
+    /// Fraction of the steps before the poses start to move, so that the map has
+    /// formed first (default 0.1).
+    #[arg(long, requires = "refine_poses")]
+    pose_start: Option<f64>,
+    /// Refine x, y and yaw only, and leave height, roll and pitch to the LiDAR
+    /// alignment (the default when the poses are aligned to the LiDAR).
+    #[arg(long, requires = "refine_poses", conflicts_with = "pose_all")]
+    pose_planar: bool,
+    /// Refine all six degrees of freedom even where the LiDAR alignment ran.
+    #[arg(long, requires = "refine_poses")]
+    pose_all: bool,
 }
 
 impl SettingsArgs {
@@ -164,6 +188,14 @@ impl SettingsArgs {
             tile_overlap_m: Some(a.tile_overlap_m),
             ply_up: None,
             fault_tile: None,
+            refine_poses: Some(a.refine_poses),
+            pose_lr_m: a.pose_lr_m,
+            pose_lr_deg: a.pose_lr_deg,
+            pose_start: a.pose_start,
+            pose_planar: a
+                .pose_planar
+                .then_some(true)
+                .or(a.pose_all.then_some(false)),
         }
     }
 }
@@ -366,6 +398,16 @@ pub(super) fn write_map(
     let report = serde_json::to_vec_pretty(&report).map_err(|e| e.to_string())?;
     let map = crate::export::map_file::write(&o, b, &report)?;
     files.push(("report.json".into(), report));
+    if let Some(p) = run.pose_refiner() {
+        let poses: Vec<_> = b
+            .manifest
+            .frames
+            .iter()
+            .map(|f| f.vehicle_to_world)
+            .collect();
+        let json = serde_json::to_vec_pretty(&p.file(&poses)).map_err(|e| e.to_string())?;
+        files.push(("poses_refined.json".into(), json));
+    }
     files.push(("map.rogsmap".into(), map));
     write_files(out, &files)?;
     if let Some(m) = &o.metrics {

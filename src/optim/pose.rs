@@ -13,7 +13,7 @@
 //! zero, and a start after part of the schedule, once the map has formed (before
 //! that the gradient says more about the map than about the poses).
 
-use crate::bundle::transform::{exp_so3, mat, mul};
+use crate::bundle::transform::{apply, exp_so3, mat, mul};
 use crate::bundle::Mat4Rows;
 use crate::gpu::buffers::{bind, dispatch, pipeline, storage, uniform};
 use crate::gpu::GpuContext;
@@ -38,17 +38,20 @@ pub struct PoseConfig {
     pub decay: f64,
     /// Fraction of the schedule's steps before the poses start to move.
     pub start: f64,
+    /// Only x, y and yaw move (what the LiDAR alignment cannot see); else all six.
+    pub planar: bool,
 }
 
 impl Default for PoseConfig {
     fn default() -> Self {
         Self {
-            lr_translation_m: 0.005,
-            lr_rotation_deg: 0.05,
+            lr_translation_m: 0.01,
+            lr_rotation_deg: 0.1,
             max_translation_m: 0.5,
             max_rotation_deg: 3.0,
             decay: 0.0,
-            start: 0.25,
+            start: 0.1,
+            planar: false,
         }
     }
 }
@@ -237,9 +240,11 @@ impl PoseRefiner {
         self.updates.get(frame).copied().unwrap_or(0)
     }
 
-    /// One Adam step of `frame`'s correction with the gradient dL/d(ω, τ). A gradient
-    /// that is not finite is ignored.
-    pub fn update(&mut self, frame: usize, g: [f64; 6]) {
+    /// One Adam step of `frame`'s correction with the gradient dL/d(ω, τ), at
+    /// `progress` (0 to 1) of the refining steps: the rates fall linearly to a tenth
+    /// by the end, so that the corrections settle instead of wandering by a rate's
+    /// worth each step. A gradient that is not finite is ignored.
+    pub fn update(&mut self, frame: usize, g: [f64; 6], progress: f64) {
         if frame >= self.corrections.len() || g.iter().any(|v| !v.is_finite()) {
             return;
         }
@@ -250,22 +255,151 @@ impl PoseRefiner {
         let b1 = 1.0 - BETA1.powi(t as i32);
         let b2 = 1.0 - BETA2.powi(t as i32);
         let corr = &mut self.corrections[frame];
-        let lr_r = c.lr_rotation_deg.to_radians();
+        let fall = 1.0 - 0.9 * progress.clamp(0.0, 1.0);
+        let lr_r = fall * c.lr_rotation_deg.to_radians();
+        let lr_t = fall * c.lr_translation_m;
         let max_r = c.max_rotation_deg.to_radians();
         for k in 0..6 {
+            // Roll, pitch and height (ω x, ω y, τ z) stay when planar.
+            if c.planar && matches!(k, 0 | 1 | 5) {
+                continue;
+            }
             m[k] = BETA1 * m[k] + (1.0 - BETA1) * g[k];
             v[k] = BETA2 * v[k] + (1.0 - BETA2) * g[k] * g[k];
             let step = (m[k] / b1) / ((v[k] / b2).sqrt() + EPS);
             let (x, lr, max) = if k < 3 {
                 (&mut corr.omega[k], lr_r, max_r)
             } else {
-                (
-                    &mut corr.tau[k - 3],
-                    c.lr_translation_m,
-                    c.max_translation_m,
-                )
+                (&mut corr.tau[k - 3], lr_t, c.max_translation_m)
             };
             *x = ((*x - lr * step) * (1.0 - c.decay)).clamp(-max, max);
         }
+    }
+}
+
+/// Translation (m) and rotation (degrees) of `a` relative to `b`, the horizontal
+/// part (x, y in m; yaw in degrees) that the LiDAR alignment cannot see, and what the
+/// map sees of it: the RMS distance (m) between where the two poses put the ground
+/// 5 to 15 m ahead of the vehicle and up to 3 m to either side (yaw and a sideways
+/// shift can cancel there, or add up).
+pub fn pose_error(a: &Mat4Rows, b: &Mat4Rows) -> [f64; 5] {
+    let d = [0, 1, 2].map(|k| a[k][3] - b[k][3]);
+    // R_a R_bᵀ: its angle, and its yaw (rotation about z).
+    let r = |i: usize, j: usize| (0..3).map(|k| a[i][k] * b[j][k]).sum::<f64>();
+    let tr = r(0, 0) + r(1, 1) + r(2, 2);
+    let angle = ((tr - 1.0) / 2.0).clamp(-1.0, 1.0).acos().to_degrees();
+    let yaw = (r(1, 0) - r(0, 1)).atan2(r(0, 0) + r(1, 1)).to_degrees();
+    let ground = rms([5.0, 10.0, 15.0].into_iter().flat_map(|x| {
+        [-3.0, 0.0, 3.0].map(|y| {
+            let p = [x, y, 0.0];
+            let (pa, pb) = (apply(a, p), apply(b, p));
+            (0..3).map(|k| (pa[k] - pb[k]).powi(2)).sum::<f64>().sqrt()
+        })
+    }));
+    [
+        (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt(),
+        angle,
+        d[0].hypot(d[1]),
+        yaw.abs(),
+        ground,
+    ]
+}
+
+fn rms(v: impl Iterator<Item = f64>) -> f64 {
+    let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x * x, n + 1));
+    if n == 0 {
+        0.0
+    } else {
+        (s / n as f64).sqrt()
+    }
+}
+
+impl PoseRefiner {
+    /// Every frame's corrected vehicle pose (`poses` as the run used them).
+    pub fn corrected(&self, poses: &[Mat4Rows]) -> Vec<Mat4Rows> {
+        poses
+            .iter()
+            .enumerate()
+            .map(|(k, p)| self.correction(k).apply_to_pose(p))
+            .collect()
+    }
+
+    /// report.json's `pose_refinement`: the corrections' size over the frames that
+    /// were updated, and with the exact poses (`truth`), the poses' error before
+    /// (as the run was given them, after any LiDAR alignment) and after, RMS.
+    pub fn summary(&self, poses: &[Mat4Rows], truth: Option<&[Mat4Rows]>) -> serde_json::Value {
+        let frames: Vec<usize> = (0..poses.len()).filter(|&k| self.updates(k) > 0).collect();
+        let mag = |k: &usize| self.correction(*k).magnitude();
+        let mut r = serde_json::json!({
+            "settings": self.cfg,
+            "frames_refined": frames.len(),
+            "updates_per_frame": if frames.is_empty() { 0.0 } else {
+                frames.iter().map(|&k| self.updates(k) as f64).sum::<f64>() / frames.len() as f64
+            },
+            "correction_rms_m": rms(frames.iter().map(|k| mag(k).0)),
+            "correction_rms_deg": rms(frames.iter().map(|k| mag(k).1)),
+        });
+        if let Some(t) = truth.filter(|t| t.len() == poses.len()) {
+            let after = self.corrected(poses);
+            let err = |set: &[Mat4Rows], i: usize| {
+                rms(frames.iter().map(|&k| pose_error(&set[k], &t[k])[i]))
+            };
+            // The horizontal error less its mean over the frames: a shift shared by
+            // every frame moves the map with it and no image can tell it.
+            let mean = |set: &[Mat4Rows]| {
+                let n = frames.len().max(1) as f64;
+                frames.iter().fold([0.0; 2], |a, &k| {
+                    [
+                        a[0] + (set[k][0][3] - t[k][0][3]) / n,
+                        a[1] + (set[k][1][3] - t[k][1][3]) / n,
+                    ]
+                })
+            };
+            let centred = |set: &[Mat4Rows]| {
+                let m = mean(set);
+                rms(frames.iter().map(|&k| {
+                    (set[k][0][3] - t[k][0][3] - m[0]).hypot(set[k][1][3] - t[k][1][3] - m[1])
+                }))
+            };
+            let keys = [
+                "translation_m",
+                "rotation_deg",
+                "xy_m",
+                "yaw_deg",
+                "ground_m",
+            ];
+            let mut before = serde_json::Map::new();
+            let mut now = serde_json::Map::new();
+            for (i, k) in keys.iter().enumerate() {
+                before.insert((*k).into(), err(poses, i).into());
+                now.insert((*k).into(), err(&after, i).into());
+            }
+            before.insert("xy_centred_m".into(), centred(poses).into());
+            now.insert("xy_centred_m".into(), centred(&after).into());
+            r["error_before"] = before.into();
+            r["error_after"] = now.into();
+        }
+        r
+    }
+
+    /// poses_refined.json: every frame's corrected `vehicle_to_world` and its
+    /// correction (degrees about the world axes at the vehicle, metres).
+    pub fn file(&self, poses: &[Mat4Rows]) -> serde_json::Value {
+        let frames: Vec<serde_json::Value> = self
+            .corrected(poses)
+            .iter()
+            .enumerate()
+            .map(|(k, p)| {
+                let c = self.correction(k);
+                serde_json::json!({
+                    "frame": k,
+                    "vehicle_to_world": p,
+                    "rotation_deg": c.omega.map(f64::to_degrees),
+                    "translation_m": c.tau,
+                    "updates": self.updates(k),
+                })
+            })
+            .collect();
+        serde_json::json!({ "frames": frames })
     }
 }

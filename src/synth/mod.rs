@@ -481,7 +481,13 @@ pub fn generate(cfg: &SynthConfig, progress: Progress) -> Result<SynthOutput, St
         class_ids: "truth/class_ids.png".into(),
         elevation: "truth/elevation.f32".into(),
         valid: "truth/valid.png".into(),
+        poses: Some("truth/poses.json".into()),
     };
+    // The exact poses: the bundle's frames carry them with the configured noise.
+    files.push((
+        "truth/poses.json".into(),
+        serde_json::to_vec(&true_poses).unwrap_or_default(),
+    ));
     files.push((ground_truth.rgb.clone(), png_rgb(&gt.rgb)));
     files.push((ground_truth.class_ids.clone(), png_gray(&gt.class_ids)));
     files.push((

@@ -443,6 +443,9 @@ pub struct TiledRun {
     /// Fault injection for tests of failure and resume: the tile of this plan index
     /// fails at its first step as a lost device would (`rogs reconstruct --fault-tile`).
     pub fault_tile: Option<usize>,
+    /// The pose corrections between two tiles' sessions (each session holds them
+    /// while it trains).
+    poses: Option<crate::optim::pose::PoseRefiner>,
 }
 
 impl TiledRun {
@@ -515,6 +518,7 @@ impl TiledRun {
             pending: Default::default(),
             fingerprint: 0,
             fault_tile: None,
+            poses: None,
             cfg,
         };
         match tiling {
@@ -675,10 +679,14 @@ impl TiledRun {
             if self.done.get(self.started - 1).copied().unwrap_or(false) {
                 continue;
             }
+            self.park_poses();
             self.session = None;
             self.recorded = false;
             match Session::build(b, self.cfg.clone(), self.ctx.clone(), Some(&tile)).await {
-                Ok(s) => {
+                Ok(mut s) => {
+                    if let Some(p) = self.poses.take() {
+                        s.poses = Some(p);
+                    }
                     self.session = Some(s);
                     sample_gpu(&self.ctx, &mut self.peak_gpu_bytes);
                     return Ok(true);
@@ -942,10 +950,26 @@ impl TiledRun {
             return false;
         };
         self.failed = None;
+        self.park_poses();
         self.session = None;
         self.recorded = false;
         self.started = k;
         true
+    }
+
+    /// Takes the pose corrections out of the current session before it is dropped.
+    fn park_poses(&mut self) {
+        if let Some(p) = self.session.as_mut().and_then(|s| s.poses.take()) {
+            self.poses = Some(p);
+        }
+    }
+
+    /// The pose corrections so far (with `--refine-poses`).
+    pub fn pose_refiner(&self) -> Option<&crate::optim::pose::PoseRefiner> {
+        self.session
+            .as_ref()
+            .and_then(|s| s.poses.as_ref())
+            .or(self.poses.as_ref())
     }
 
     /// Tiles finished (trained here or restored from checkpoints).
@@ -1055,6 +1079,17 @@ impl TiledRun {
             }
         }
         r["pose_alignment"] = serde_json::to_value(&self.alignment).unwrap_or_default();
+        if let Some(p) = self.pose_refiner() {
+            let poses: Vec<_> = b
+                .manifest
+                .frames
+                .iter()
+                .map(|f| f.vehicle_to_world)
+                .collect();
+            // Exact poses that cannot be read are not scored; the map is unaffected.
+            let truth = b.read_true_poses().ok().flatten();
+            r["pose_refinement"] = p.summary(&poses, truth.as_deref());
+        }
         r["timings"]["align_ms"] = self.align_ms.into();
         r["timings"]["eval_ms"] = self.eval_ms.into();
         r["tiling"] = serde_json::to_value(self.tiling).unwrap_or_default();

@@ -376,12 +376,7 @@ fn pose_refinement_pulls_injected_pose_errors_back() {
     });
     let (s, _) = run(&mut b, cfg);
     let r = s.poses.as_ref().expect("refinement ran");
-    let given: Vec<_> = b
-        .manifest
-        .frames
-        .iter()
-        .map(|f| f.vehicle_to_world)
-        .collect();
+    let given = b.manifest.vehicle_poses();
     let after = r.corrected(&given);
     let mut ratios = Vec::new();
     for &(k, _, _) in &inject {

@@ -154,6 +154,11 @@ pub struct GroundTruth {
 }
 
 impl Manifest {
+    /// Every frame's `vehicle_to_world`, in order.
+    pub fn vehicle_poses(&self) -> Vec<Mat4Rows> {
+        self.frames.iter().map(|f| f.vehicle_to_world).collect()
+    }
+
     /// The offset from the bundle's world to its dataset frame (zero without one).
     pub fn frame_offset(&self) -> [f64; 3] {
         self.world_frame.as_ref().map_or([0.0; 3], |f| f.offset_m)

@@ -123,7 +123,10 @@ pub fn run() -> ExitCode {
         Command::Eval(a) => eval::run(a),
         Command::Bench(b) => bench::run(b),
         Command::Import(a) => import::run(a),
-        Command::Reconstruct(a) => reconstruct::run(a),
+        Command::Reconstruct(a) => match reconstruct::tile_job(&a) {
+            Some((plan, tile, out)) => jobs::run_tile(plan, tile, out),
+            None => reconstruct::run(a),
+        },
         Command::Plan(a) => jobs::plan(a),
         Command::Merge(a) => jobs::merge(a),
     };

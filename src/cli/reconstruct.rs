@@ -262,10 +262,12 @@ pub(super) fn start(b: &mut Bundle, s: &Settings, tiled: bool) -> Result<TiledRu
     }
 }
 
+/// The tile job `--plan P --tile NAME` asks for, if any: (plan, tile, out).
+pub fn tile_job(a: &Args) -> Option<(&std::path::Path, &str, &std::path::Path)> {
+    Some((a.plan.as_deref()?, a.tile.as_deref()?, &a.out))
+}
+
 pub fn run(a: Args) -> Result<ExitCode, String> {
-    if let (Some(plan), Some(tile)) = (&a.plan, &a.tile) {
-        return super::jobs::run_tile(plan, tile, &a.out);
-    }
     let names: Vec<String> = a.bundles.iter().map(|p| p.display().to_string()).collect();
     let mut b = match open_bundles(&a.bundles) {
         Ok(b) => b,
@@ -399,13 +401,7 @@ pub(super) fn write_map(
     let map = crate::export::map_file::write(&o, b, &report)?;
     files.push(("report.json".into(), report));
     if let Some(p) = run.pose_refiner() {
-        let poses: Vec<_> = b
-            .manifest
-            .frames
-            .iter()
-            .map(|f| f.vehicle_to_world)
-            .collect();
-        let json = serde_json::to_vec_pretty(&p.file(&poses)).map_err(|e| e.to_string())?;
+        let json = serde_json::to_vec_pretty(&p.file(&b.manifest)).map_err(|e| e.to_string())?;
         files.push(("poses_refined.json".into(), json));
     }
     files.push(("map.rogsmap".into(), map));

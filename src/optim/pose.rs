@@ -14,7 +14,7 @@
 //! that the gradient says more about the map than about the poses).
 
 use crate::bundle::transform::{apply, exp_so3, mat, mul};
-use crate::bundle::Mat4Rows;
+use crate::bundle::{Manifest, Mat4Rows};
 use crate::gpu::buffers::{bind, dispatch, pipeline, storage, uniform};
 use crate::gpu::GpuContext;
 use crate::render::gpu::{GpuForward, GpuParams};
@@ -326,8 +326,9 @@ impl PoseRefiner {
 
     /// report.json's `pose_refinement`: the corrections' size over the frames that
     /// were updated, and with the exact poses (`truth`), the poses' error before
-    /// (as the run was given them, after any LiDAR alignment) and after, RMS.
-    pub fn summary(&self, poses: &[Mat4Rows], truth: Option<&[Mat4Rows]>) -> serde_json::Value {
+    /// (as the run was given them in `m`, after any LiDAR alignment) and after, RMS.
+    pub fn summary(&self, m: &Manifest, truth: Option<&[Mat4Rows]>) -> serde_json::Value {
+        let poses = &m.vehicle_poses();
         let frames: Vec<usize> = (0..poses.len()).filter(|&k| self.updates(k) > 0).collect();
         let mag = |k: &usize| self.correction(*k).magnitude();
         let mut r = serde_json::json!({
@@ -382,11 +383,12 @@ impl PoseRefiner {
         r
     }
 
-    /// poses_refined.json: every frame's corrected `vehicle_to_world` and its
-    /// correction (degrees about the world axes at the vehicle, metres).
-    pub fn file(&self, poses: &[Mat4Rows]) -> serde_json::Value {
+    /// poses_refined.json: every frame's corrected `vehicle_to_world` (of `m`, as
+    /// the run was given them) and its correction (degrees about the world axes at
+    /// the vehicle, metres).
+    pub fn file(&self, m: &Manifest) -> serde_json::Value {
         let frames: Vec<serde_json::Value> = self
-            .corrected(poses)
+            .corrected(&m.vehicle_poses())
             .iter()
             .enumerate()
             .map(|(k, p)| {

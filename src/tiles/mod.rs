@@ -1080,15 +1080,9 @@ impl TiledRun {
         }
         r["pose_alignment"] = serde_json::to_value(&self.alignment).unwrap_or_default();
         if let Some(p) = self.pose_refiner() {
-            let poses: Vec<_> = b
-                .manifest
-                .frames
-                .iter()
-                .map(|f| f.vehicle_to_world)
-                .collect();
             // Exact poses that cannot be read are not scored; the map is unaffected.
             let truth = b.read_true_poses().ok().flatten();
-            r["pose_refinement"] = p.summary(&poses, truth.as_deref());
+            r["pose_refinement"] = p.summary(&b.manifest, truth.as_deref());
         }
         r["timings"]["align_ms"] = self.align_ms.into();
         r["timings"]["eval_ms"] = self.eval_ms.into();

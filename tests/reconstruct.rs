@@ -399,15 +399,15 @@ fn pose_refinement_pulls_injected_pose_errors_back() {
         .collect();
     let mean = others.iter().sum::<f64>() / others.len() as f64;
     eprintln!("other frames: ground error mean {:.1} cm", 100.0 * mean);
-    // Measured (lavapipe): ground errors to 0.41, 0.77 and 0.69 of the injected; the
-    // exact frames 3.3 cm off on average (the corrections' noise).
+    // Measured (lavapipe): ground errors to 0.53, 0.53 and 0.42 of the injected; the
+    // exact frames 3.9 cm off on average (the corrections' noise).
     eprintln!("ratios {ratios:?}");
     assert!(
-        ratios.iter().all(|&r| r < 0.9),
+        ratios.iter().all(|&r| r < 0.8),
         "ground error kept: {ratios:?}"
     );
     assert!(
-        ratios.iter().sum::<f64>() / 3.0 < 0.75,
+        ratios.iter().sum::<f64>() / 3.0 < 0.65,
         "ground error kept: {ratios:?}"
     );
     assert!(mean < 0.05, "exact frames moved by {mean} m on average");

@@ -138,10 +138,10 @@ pub struct SettingsArgs {
     /// poses_refined.json.
     #[arg(long)]
     refine_poses: bool,
-    /// Its learning rate of translation, metres per step (default 0.01).
+    /// Its learning rate of translation, metres per step (default 0.02).
     #[arg(long, requires = "refine_poses")]
     pose_lr_m: Option<f64>,
-    /// Its learning rate of rotation, degrees per step (default 0.1).
+    /// Its learning rate of rotation, degrees per step (default 0.2).
     #[arg(long, requires = "refine_poses")]
     pose_lr_deg: Option<f64>,
     /// Fraction of the steps before the poses start to move, so that the map has

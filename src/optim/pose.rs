@@ -8,7 +8,8 @@
 //! also translate it, and every camera of the frame moves with it (the rig stays as
 //! the bundle gives it). The gradient comes from the GPU (`shaders/pose_grad.wgsl`,
 //! host unit `PoseGrad`, oracle `gradient`) after each step; the corrections live on
-//! the host, a few numbers per frame, and are stepped there with Adam. What keeps
+//! the host, a few numbers per frame, and are stepped there with Adam (its second
+//! moment shared by every frame, so that a weak gradient moves its frame little). What keeps
 //! them near the given poses: a box (`PoseConfig::max_*`), a decoupled decay toward
 //! zero, and a start after part of the schedule, once the map has formed (before
 //! that the gradient says more about the map than about the poses).
@@ -45,8 +46,8 @@ pub struct PoseConfig {
 impl Default for PoseConfig {
     fn default() -> Self {
         Self {
-            lr_translation_m: 0.01,
-            lr_rotation_deg: 0.1,
+            lr_translation_m: 0.02,
+            lr_rotation_deg: 0.2,
             max_translation_m: 0.5,
             max_rotation_deg: 3.0,
             decay: 0.0,
@@ -212,7 +213,13 @@ impl PoseGrad {
 pub struct PoseRefiner {
     pub cfg: PoseConfig,
     pub corrections: Vec<Correction>,
-    moments: Vec<[[f64; 6]; 2]>,
+    /// Adam's first moment per frame.
+    moments: Vec<[f64; 6]>,
+    /// Its second moment, one per axis for every frame together (and the updates
+    /// it has seen): a frame's step is its gradient against the typical gradient of
+    /// all frames, so a view that says little moves its frame little.
+    scale: [f64; 6],
+    scale_updates: u32,
     updates: Vec<u32>,
 }
 
@@ -225,7 +232,9 @@ impl PoseRefiner {
         Self {
             cfg,
             corrections: vec![Correction::default(); frames],
-            moments: vec![[[0.0; 6]; 2]; frames],
+            moments: vec![[0.0; 6]; frames],
+            scale: [0.0; 6],
+            scale_updates: 0,
             updates: vec![0; frames],
         }
     }
@@ -251,9 +260,11 @@ impl PoseRefiner {
         let c = &self.cfg;
         let t = self.updates[frame] + 1;
         self.updates[frame] = t;
-        let [m, v] = &mut self.moments[frame];
+        self.scale_updates += 1;
+        let m = &mut self.moments[frame];
+        let v = &mut self.scale;
         let b1 = 1.0 - BETA1.powi(t as i32);
-        let b2 = 1.0 - BETA2.powi(t as i32);
+        let b2 = 1.0 - BETA2.powi(self.scale_updates as i32);
         let corr = &mut self.corrections[frame];
         let fall = 1.0 - 0.9 * progress.clamp(0.0, 1.0);
         let lr_r = fall * c.lr_rotation_deg.to_radians();

@@ -46,7 +46,9 @@ pub enum ReconstructError {
     NoViews,
     #[error(
         "the map would be {width}×{height} px at {resolution} m, {mib} MiB of layers, over the budget of {budget_mib} MiB; \
-         use a coarser resolution (--resolution; twice as coarse needs a quarter), or map the drive in parts of a few km",
+         use a coarser resolution (--resolution; twice as coarse needs a quarter), map it in tiles (--tile-m: \
+         natively, a tiled map too large for whole layers is written tile by tile into map.rogsmap), \
+         or map the drive in parts of a few km",
         mib = bytes >> 20, budget_mib = budget >> 20
     )]
     MapTooLarge {
@@ -77,6 +79,8 @@ pub enum ReconstructError {
     EmptyTile,
     #[error("a tile checkpoint was refused: {0}")]
     Checkpoint(String),
+    #[error("cannot write the map: {0}")]
+    Write(String),
     #[error("tile {tile}: {source}")]
     Tile {
         tile: String,
@@ -152,7 +156,7 @@ impl ReconstructError {
             Self::Prepare(_) | Self::Bundle(_) | Self::NoViews | Self::EmptyTile => true,
             Self::MapTooLarge { .. } | Self::Checkpoint(_) => true,
             Self::ImageTooLargeForGpu { .. } => true,
-            Self::Gpu(_) | Self::Train(_) => false,
+            Self::Gpu(_) | Self::Train(_) | Self::Write(_) => false,
             Self::Tile { source, .. } => source.is_input(),
         }
     }
@@ -187,6 +191,19 @@ pub struct ReconstructConfig {
     pub align: Option<AlignConfig>,
     /// Photometric pose refinement during training (`optim::pose`); `None`: off.
     pub poses: Option<crate::optim::pose::PoseConfig>,
+    /// How the finished map is held.
+    pub map: MapConfig,
+}
+
+/// How the finished map is held (`tiles::stitch`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct MapConfig {
+    /// Host bytes the map's whole layers may take; `None`: 4 × the grid's budget.
+    pub budget_bytes: Option<u64>,
+    /// A tiled map whose whole layers would exceed the budget is written block by
+    /// block into map.rogsmap (`TiledRun::finish_streamed`) instead of being refused;
+    /// set where the caller writes files (the CLI), not in the page.
+    pub stream: bool,
 }
 
 impl Default for ReconstructConfig {
@@ -201,6 +218,7 @@ impl Default for ReconstructConfig {
             baseline_ipm: false,
             align: Some(AlignConfig::default()),
             poses: None,
+            map: MapConfig::default(),
         }
     }
 }
@@ -740,6 +758,30 @@ pub struct Layers {
 }
 
 impl Outcome {
+    /// The outcome of a block of a map (its layers over `g`), unscored: how a map
+    /// too large for whole layers is written, one block at a time
+    /// (`TiledRun::finish_streamed`). `truth`: the whole truth raster, cut to `g`.
+    pub fn block(
+        g: BevGeometry,
+        layers: Layers,
+        truth: Option<&BevRaster>,
+        road_channels: &[(usize, u8)],
+        min_alpha: f32,
+    ) -> Self {
+        let raster = bev::to_raster(&layers.bev, &g, road_channels, min_alpha);
+        Outcome {
+            params: Params::default(),
+            geometry: g,
+            bev: layers.bev,
+            raster,
+            confidence: layers.confidence,
+            density: layers.density,
+            truth: truth.map(|t| t.crop_to(&g)),
+            metrics: None,
+            holdout: None,
+        }
+    }
+
     /// The outcome of layers over the map's geometry `g`: the raster and the metrics
     /// (`centres`: the surfel centres some view saw, world).
     #[allow(clippy::too_many_arguments)]

@@ -86,6 +86,9 @@ pub struct Settings {
     /// Refine x, y and yaw only; default: when the poses are aligned to the LiDAR.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pose_planar: Option<bool>,
+    /// Host memory the map's whole layers may take, MiB (default: 8 GiB).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub map_memory_mib: Option<u64>,
 }
 
 /// What a front end uses where a setting is absent.
@@ -205,6 +208,8 @@ impl Settings {
             p.planar = self.pose_planar.unwrap_or(aligned);
             c.poses = Some(p);
         }
+        c.map.budget_bytes =
+            positive("map_memory_mib", self.map_memory_mib, "8192")?.map(|m| m << 20);
         Ok(c)
     }
 

@@ -5,6 +5,8 @@
 //! overlap).
 #![cfg(not(target_arch = "wasm32"))]
 
+mod common;
+
 use rogs::bundle::{write_zip, Bundle, Limits, Manifest};
 use rogs::gpu::GpuContext;
 use rogs::reconstruct::{Outcome, ReconstructConfig};
@@ -411,6 +413,106 @@ fn a_map_too_large_for_memory_is_refused_with_advice_before_it_is_allocated() {
         e.contains("MiB of layers") && e.contains("coarser resolution"),
         "{e}"
     );
+}
+
+#[test]
+fn a_map_too_large_for_whole_layers_streams_block_by_block_into_the_same_map_file() {
+    // The IPM baseline (no training) of `demo` at the truth's 2 cm in 12 m tiles:
+    // a map of 8 × 3 blocks (1867 × 718 px, 107.2 MB of whole layers, 101.9 MB of
+    // blocks: the corridor fills this straight drive's box), with a budget between.
+    let mut c = SynthConfig::preset(Preset::Demo, 1);
+    c.rays_per_axis = 1;
+    c.truth_resolution = 0.02;
+    let out = generate(&c, &|_, _, _| {}).expect("synth");
+    let mut b = bundle(&out.manifest, &out.files);
+    let mut cfg = cfg();
+    cfg.baseline_ipm = true;
+    cfg.map.budget_bytes = Some(104_000_000);
+    let t = TileConfig {
+        size_m: 12.0,
+        overlap_m: 2.0,
+    };
+    // Without streaming (the page), the same map is refused before any work.
+    let e = match pollster::block_on(TiledRun::new(&mut b, cfg.clone(), Some(t), ctx())) {
+        Err(e) => e.to_string(),
+        Ok(_) => panic!("a map over the budget must be refused where it cannot stream"),
+    };
+    assert!(e.contains("MiB of layers") && e.contains("--tile-m"), "{e}");
+    cfg.map.stream = true;
+    let mut b = bundle(&out.manifest, &out.files);
+    let mut r = pollster::block_on(TiledRun::new(&mut b, cfg, Some(t), ctx())).expect("run");
+    assert!(r.streamed, "a tiled map over the budget streams");
+    while pollster::block_on(r.step(&b)).expect("step").is_some() {}
+    let s = pollster::block_on(r.finish_streamed(&b, "demo", &mut |_, _| {})).expect("streamed");
+    let held = s.report["map_layers"]["held_bytes"].as_u64().unwrap_or(0);
+    let whole = s.report["map_layers"]["whole_layers_bytes"]
+        .as_u64()
+        .unwrap_or(0);
+    assert!(
+        held > 0 && held <= 104_000_000 && whole > 104_000_000,
+        "{}",
+        s.report["map_layers"]
+    );
+    // The same run finished whole (the budget only decides which way the CLI goes).
+    let o = pollster::block_on(r.finish(&b, &mut |_, _| {})).expect("finish");
+    let dense = rogs::export::map_file::write(&o, &b, b"{}").expect("map");
+    let (a, d) = (common::zip_entries(&s.map), common::zip_entries(&dense));
+    let tiles = |e: &[(String, Vec<u8>)]| -> Vec<(String, Vec<u8>)> {
+        let mut t: Vec<_> = e
+            .iter()
+            .filter(|(n, _)| n.starts_with("layers/") || n.starts_with("values/"))
+            .cloned()
+            .collect();
+        t.sort();
+        t
+    };
+    let (ta, td) = (tiles(&a), tiles(&d));
+    assert!(ta.len() > 40, "{} tiles", ta.len());
+    assert_eq!(
+        ta.iter().map(|t| &t.0).collect::<Vec<_>>(),
+        td.iter().map(|t| &t.0).collect::<Vec<_>>(),
+        "the same tiles"
+    );
+    for ((name, x), (_, y)) in ta.iter().zip(&td) {
+        assert!(
+            x == y,
+            "{name} differs between the streamed and the whole map"
+        );
+    }
+    let index = |e: &[(String, Vec<u8>)]| -> serde_json::Value {
+        let j = &e.iter().find(|f| f.0 == "map.json").expect("map.json").1;
+        serde_json::from_slice(j).expect("json")
+    };
+    let (ia, id) = (index(&a), index(&d));
+    for k in [
+        "present",
+        "stats",
+        "elevation_range",
+        "layers",
+        "values",
+        "width",
+    ] {
+        assert_eq!(ia[k], id[k], "map.json {k}");
+    }
+    // Metrics summed over the blocks are the whole map's.
+    let (ms, mw) = (
+        s.outcome.metrics.clone().expect("streamed metrics"),
+        o.metrics.clone().expect("metrics"),
+    );
+    assert!(
+        (ms.psnr_db.unwrap() - mw.psnr_db.unwrap()).abs() < 1e-9,
+        "{ms:?} {mw:?}"
+    );
+    assert!(
+        (ms.miou.unwrap() - mw.miou.unwrap()).abs() < 1e-12,
+        "{ms:?} {mw:?}"
+    );
+    assert_eq!(ms.elevation_rmse_m, mw.elevation_rmse_m);
+    let (bs, bw) = (
+        s.report["seams"]["border_pairs"].as_u64().unwrap_or(0),
+        seams(&o.raster, t.size_m).border_pairs as u64,
+    );
+    assert!(bs > 0 && bs <= bw, "seam pairs streamed {bs}, whole {bw}");
 }
 
 #[test]

@@ -155,6 +155,12 @@ pub struct SettingsArgs {
     /// Refine all six degrees of freedom even where the LiDAR alignment ran.
     #[arg(long, requires = "refine_poses")]
     pose_all: bool,
+    /// Host memory the map's whole layers may take, MiB (default 8192). A tiled map
+    /// whose whole layers would need more is written tile by tile into map.rogsmap
+    /// (every layer, at every zoom; no whole-image PNG or GeoTIFF layers), holding
+    /// only the blocks of the map the drive covers.
+    #[arg(long)]
+    map_memory_mib: Option<u64>,
 }
 
 impl SettingsArgs {
@@ -196,6 +202,7 @@ impl SettingsArgs {
                 .pose_planar
                 .then_some(true)
                 .or(a.pose_all.then_some(false)),
+            map_memory_mib: a.map_memory_mib,
         }
     }
 }
@@ -227,7 +234,7 @@ pub(super) fn open_bundles(paths: &[PathBuf]) -> Result<Bundle, ExitCode> {
 /// tiles (96 m when `s` names no size), as a plan is. Bad input is printed and
 /// answered with its exit code.
 pub(super) fn start(b: &mut Bundle, s: &Settings, tiled: bool) -> Result<TiledRun, ExitCode> {
-    let (cfg, asked) = match s
+    let (mut cfg, asked) = match s
         .config(&b.manifest, crate::settings::CLI)
         .and_then(|c| Ok((c, s.tiling()?)))
     {
@@ -237,6 +244,8 @@ pub(super) fn start(b: &mut Bundle, s: &Settings, tiled: bool) -> Result<TiledRu
             return Err(ExitCode::from(EXIT_INVALID_INPUT));
         }
     };
+    // Files are written here: a map too large for whole layers streams into them.
+    cfg.map.stream = true;
     let tiling = match tiled {
         true => Some(asked.unwrap_or_default()),
         false => crate::tiles::choose(&b.manifest, &cfg, asked),
@@ -383,6 +392,9 @@ pub(super) fn write_map(
     name: &str,
     ply_up: crate::export::ply::Up,
 ) -> Result<(), String> {
+    if run.streamed {
+        return write_streamed(out, run, b, name, ply_up);
+    }
     let mut bar = Progress::new("BEV");
     let outcome = pollster::block_on(run.finish(b, &mut |d, t| bar.update(d, t)));
     bar.finish();
@@ -414,6 +426,62 @@ pub(super) fn write_map(
             "held-out road PSNR {:.2} dB (IPM baseline {:.2} dB) over {} frames",
             h.psnr_db, h.ipm_psnr_db, h.frames
         );
+    }
+    eprintln!(
+        "wrote {} files to {}",
+        model.len() + files.len(),
+        out.display()
+    );
+    Ok(())
+}
+
+/// As `write_map`, for a map too large for whole layers (`TiledRun::streamed`): the
+/// model, map.rogsmap written block by block, report.json, bev.json.
+fn write_streamed(
+    out: &std::path::Path,
+    run: &mut TiledRun,
+    b: &Bundle,
+    name: &str,
+    ply_up: crate::export::ply::Up,
+) -> Result<(), String> {
+    let (p, origin) = run.model();
+    let model = crate::export::model_files(p, origin, &b.manifest, ply_up);
+    write_files(out, &model)?;
+    let g = run.geometry;
+    eprintln!(
+        "the map is {}×{} px: its whole layers would take {} MiB, over the budget (--map-memory-mib), \
+         so every layer is written tile by tile into map.rogsmap (no whole-image PNG or GeoTIFF layers)",
+        g.width,
+        g.height,
+        crate::tiles::Stitcher::bytes(&g, p.channels) >> 20
+    );
+    let mut bar = Progress::new("map");
+    let done = pollster::block_on(run.finish_streamed(b, name, &mut |d, t| bar.update(d, t)));
+    bar.finish();
+    let done = done.map_err(|e| {
+        format!(
+            "{e} (the trained model was written to {})",
+            out.join("surfels.ply").display()
+        )
+    })?;
+    let geo = serde_json::json!({
+        "origin": g.origin, "resolution": g.resolution, "width": g.width, "height": g.height,
+        "note": "origin is the world x of the west edge and y of the north edge; row 0 is north; \
+                 the layers are in map.rogsmap (docs/MAP.md)",
+        "world_frame": b.manifest.world_frame, "frame": b.manifest.frame_description(),
+    });
+    let json = |v: &serde_json::Value| serde_json::to_vec_pretty(v).map_err(|e| e.to_string());
+    let mut files = vec![
+        ("report.json".to_string(), json(&done.report)?),
+        ("bev.json".to_string(), json(&geo)?),
+        ("map.rogsmap".to_string(), done.map),
+    ];
+    if let Some(p) = run.pose_refiner() {
+        files.push(("poses_refined.json".into(), json(&p.file(&b.manifest))?));
+    }
+    write_files(out, &files)?;
+    if let Some(m) = &done.outcome.metrics {
+        eprintln!("metrics: {}", serde_json::to_string(m).unwrap_or_default());
     }
     eprintln!(
         "wrote {} files to {}",

@@ -21,56 +21,115 @@ pub struct Metrics {
 /// PSNR (dB, peak 1.0) of `pred` against `truth` over pixels valid in both. Both
 /// rasters may differ in geometry: each truth pixel looks up the prediction at its centre.
 pub fn psnr(pred: &BevRaster, truth: &BevRaster) -> Option<f64> {
-    let (mut se, mut n) = (0.0f64, 0u64);
-    for_valid_pairs(pred, truth, |p, t| {
-        let (a, b) = (
-            pred.rgb.get_pixel(p.0, p.1).0,
-            truth.rgb.get_pixel(t.0, t.1).0,
-        );
-        for k in 0..3 {
-            let d = (a[k] as f64 - b[k] as f64) / 255.0;
-            se += d * d;
-        }
-        n += 3;
-    });
-    (n > 0).then(|| {
-        let mse = se / n as f64;
-        if mse <= 0.0 {
-            f64::INFINITY
-        } else {
-            -10.0 * mse.log10()
-        }
-    })
+    Tally::of(pred, truth).psnr()
 }
 
 /// Mean IoU over `road_classes` that occur in the truth or the prediction (valid pixels).
 pub fn miou(pred: &BevRaster, truth: &BevRaster, road_classes: &[u8]) -> Option<f64> {
-    let ious = class_iou(pred, truth, road_classes);
-    (!ious.is_empty()).then(|| ious.iter().map(|c| c.1).sum::<f64>() / ious.len() as f64)
+    Tally::of(pred, truth).miou(road_classes)
 }
 
 /// IoU of each of `road_classes` that occurs in the truth or the prediction.
 pub fn class_iou(pred: &BevRaster, truth: &BevRaster, road_classes: &[u8]) -> Vec<(u8, f64)> {
-    let mut inter = [0u64; 256];
-    let mut union = [0u64; 256];
-    for_valid_pairs(pred, truth, |p, t| {
-        let (a, b) = (
-            pred.class_ids.get_pixel(p.0, p.1).0[0],
-            truth.class_ids.get_pixel(t.0, t.1).0[0],
-        );
-        if a == b {
-            inter[a as usize] += 1;
-            union[a as usize] += 1;
-        } else {
-            union[a as usize] += 1;
-            union[b as usize] += 1;
+    Tally::of(pred, truth).class_iou(road_classes)
+}
+
+/// The sums PSNR and IoU are made of, over the pixels valid in both rasters: added
+/// up over the blocks of a map too large to hold whole, they give the whole map's.
+#[derive(Clone, Debug)]
+pub struct Tally {
+    /// Squared colour error (0–1 per channel) and the channel values counted.
+    se: f64,
+    n: u64,
+    inter: [u64; 256],
+    union: [u64; 256],
+}
+
+impl Default for Tally {
+    fn default() -> Self {
+        Self {
+            se: 0.0,
+            n: 0,
+            inter: [0; 256],
+            union: [0; 256],
         }
-    });
-    road_classes
-        .iter()
-        .filter(|&&c| union[c as usize] > 0)
-        .map(|&c| (c, inter[c as usize] as f64 / union[c as usize] as f64))
-        .collect()
+    }
+}
+
+impl Tally {
+    pub fn of(pred: &BevRaster, truth: &BevRaster) -> Self {
+        let mut t = Self::default();
+        t.add(pred, truth);
+        t
+    }
+
+    /// Adds the pixels of `truth` valid in both (each looks up the prediction at its
+    /// centre).
+    pub fn add(&mut self, pred: &BevRaster, truth: &BevRaster) {
+        for_valid_pairs(pred, truth, |p, t| {
+            let (a, b) = (
+                pred.rgb.get_pixel(p.0, p.1).0,
+                truth.rgb.get_pixel(t.0, t.1).0,
+            );
+            for k in 0..3 {
+                let d = (a[k] as f64 - b[k] as f64) / 255.0;
+                self.se += d * d;
+            }
+            self.n += 3;
+            let (a, b) = (
+                pred.class_ids.get_pixel(p.0, p.1).0[0] as usize,
+                truth.class_ids.get_pixel(t.0, t.1).0[0] as usize,
+            );
+            self.union[a] += 1;
+            if a == b {
+                self.inter[a] += 1;
+            } else {
+                self.union[b] += 1;
+            }
+        });
+    }
+
+    pub fn psnr(&self) -> Option<f64> {
+        (self.n > 0).then(|| {
+            let mse = self.se / self.n as f64;
+            if mse <= 0.0 {
+                f64::INFINITY
+            } else {
+                -10.0 * mse.log10()
+            }
+        })
+    }
+
+    pub fn class_iou(&self, road_classes: &[u8]) -> Vec<(u8, f64)> {
+        road_classes
+            .iter()
+            .filter(|&&c| self.union[c as usize] > 0)
+            .map(|&c| {
+                (
+                    c,
+                    self.inter[c as usize] as f64 / self.union[c as usize] as f64,
+                )
+            })
+            .collect()
+    }
+
+    pub fn miou(&self, road_classes: &[u8]) -> Option<f64> {
+        let ious = self.class_iou(road_classes);
+        (!ious.is_empty()).then(|| ious.iter().map(|c| c.1).sum::<f64>() / ious.len() as f64)
+    }
+
+    /// The metrics of the pixels added, with the elevation errors `e` (taken at
+    /// surfel centres, apart).
+    pub fn metrics(&self, road_classes: &[u8], e: Option<ErrorStats>) -> Metrics {
+        Metrics {
+            psnr_db: self.psnr(),
+            miou: self.miou(road_classes),
+            iou_per_class: self.class_iou(road_classes).into_iter().collect(),
+            elevation_rmse_m: e.map(|e| e.rmse),
+            elevation_mae_m: e.map(|e| e.mae),
+            elevation_p95_m: e.map(|e| e.p95),
+        }
+    }
 }
 
 fn for_valid_pairs(pred: &BevRaster, truth: &BevRaster, mut f: impl FnMut((u32, u32), (u32, u32))) {

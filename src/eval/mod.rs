@@ -6,7 +6,7 @@ pub mod raster;
 
 pub use metrics::{
     class_iou, elevation_vs_points, elevation_vs_raster, error_stats, miou, psnr, ErrorStats,
-    Metrics,
+    Metrics, Tally,
 };
 pub use raster::BevRaster;
 
@@ -29,15 +29,7 @@ pub fn evaluate(
     road: &[u8],
 ) -> Metrics {
     let e = elevation_vs_raster(points, reference);
-    let ious = class_iou(pred, reference, road);
-    Metrics {
-        psnr_db: psnr(pred, reference),
-        miou: miou(pred, reference, road),
-        iou_per_class: ious.into_iter().collect(),
-        elevation_rmse_m: e.map(|e| e.rmse),
-        elevation_mae_m: e.map(|e| e.mae),
-        elevation_p95_m: e.map(|e| e.p95),
-    }
+    metrics::Tally::of(pred, reference).metrics(road, e)
 }
 
 /// Scores a prediction against the bundle's truth raster, or, without one, against

@@ -31,6 +31,26 @@ impl BevRaster {
         }
     }
 
+    /// This raster over geometry `g` (each pixel from the pixel at its centre;
+    /// invalid outside this raster): a block of a map cut out of the truth.
+    pub fn crop_to(&self, g: &crate::bev::BevGeometry) -> Self {
+        let mut out = Self::empty(g.origin, g.resolution, g.width, g.height);
+        for r in 0..g.height {
+            for c in 0..g.width {
+                let (x, y) = out.centre(c, r);
+                let Some((sc, sr)) = self.pixel_of(x, y) else {
+                    continue;
+                };
+                out.rgb.put_pixel(c, r, *self.rgb.get_pixel(sc, sr));
+                out.class_ids
+                    .put_pixel(c, r, *self.class_ids.get_pixel(sc, sr));
+                out.valid.put_pixel(c, r, *self.valid.get_pixel(sc, sr));
+                out.elevation[(r * g.width + c) as usize] = self.elevation_at(sc, sr);
+            }
+        }
+        out
+    }
+
     /// The bundle's ground-truth rasters, if it has them.
     pub fn from_bundle(b: &Bundle) -> Result<Option<Self>, Problem> {
         let Some(gt) = &b.manifest.ground_truth else {

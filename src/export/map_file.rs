@@ -456,25 +456,24 @@ pub fn write_from(
 
 /// A finished run's layers, held in memory, as a map source.
 struct OutcomeSource {
-    width: u32,
-    rgba: Vec<Vec<u8>>,
-    values: Vec<Vec<f32>>,
+    whole: Region,
 }
 
 impl MapSource for OutcomeSource {
     fn region(&self, x0: u32, y0: u32, w: u32, h: u32) -> Result<Option<Region>, String> {
+        let r = &self.whole;
         let reg = Region {
             width: w,
             height: h,
-            rgba: self
+            rgba: r
                 .rgba
                 .iter()
-                .map(|l| crop(l, self.width, 4, x0, y0, w, h))
+                .map(|l| crop(l, r.width, 4, x0, y0, w, h))
                 .collect(),
-            values: self
+            values: r
                 .values
                 .iter()
-                .map(|v| crop(v, self.width, 1, x0, y0, w, h))
+                .map(|v| crop(v, r.width, 1, x0, y0, w, h))
                 .collect(),
         };
         Ok(Some(reg))
@@ -562,54 +561,76 @@ pub fn thumbnails(b: &Bundle) -> Vec<(usize, Vec<u8>)> {
 /// class id, confidence, density and (with truth) the elevation error; thumbnails of
 /// the input images.
 pub fn write(o: &Outcome, b: &Bundle, report: &[u8]) -> Result<Vec<u8>, String> {
-    let m = &b.manifest;
-    let g = &o.geometry;
+    let range = super::range(&super::elevation(o));
+    let index = run_index(&b.manifest, &o.geometry, o.truth.is_some(), range);
+    let src = OutcomeSource {
+        whole: region_of(o, &b.manifest, &index, range),
+    };
+    write_from(index, &src, report, &thumbnails(b), &mut |_, _| {})
+}
+
+/// The index of a run's map file over geometry `g`: every layer (the error with
+/// truth), the values `region_of` gives, the elevation ramp's `range`.
+pub fn run_index(
+    m: &Manifest,
+    g: &crate::bev::BevGeometry,
+    truth: bool,
+    range: (f32, f32),
+) -> MapIndex {
     let layers: Vec<&str> = super::LAYERS
         .iter()
         .copied()
-        .filter(|l| *l != "error" || o.truth.is_some())
+        .filter(|l| *l != "error" || truth)
         .collect();
-    let z = super::elevation(o);
-    let (lo, hi) = super::range(&z);
-    let class: Vec<f32> = o
-        .raster
-        .class_ids
-        .as_raw()
-        .iter()
-        .zip(o.raster.valid.as_raw())
-        .map(|(&c, &v)| if v != 0 { c as f32 } else { f32::NAN })
-        .collect();
-    let mut values = vec![
-        ("elevation", z),
-        ("class", class),
-        ("confidence", o.confidence.clone()),
-        ("density", o.density.clone()),
-    ];
-    if let Some(e) = super::elevation_error(o) {
-        values.push(("error", e));
-    }
-    let names: Vec<&str> = values.iter().map(|v| v.0).collect();
+    let values: &[&str] = if truth {
+        &["elevation", "class", "confidence", "density", "error"]
+    } else {
+        &["elevation", "class", "confidence", "density"]
+    };
     let mut index = new_index(
         &m.name,
         &m.semantic_classes,
         trajectory(m),
         g,
         &layers,
-        &names,
+        values,
     );
-    index.elevation_range = Some([lo, hi]);
-    let src = OutcomeSource {
-        width: g.width,
-        rgba: layers
-            .iter()
-            .map(|l| {
-                super::layer_rgba(o, m, l)
-                    .unwrap_or_else(|| vec![0; (4 * g.width * g.height) as usize])
-            })
-            .collect(),
-        values: values.into_iter().map(|v| v.1).collect(),
+    index.elevation_range = Some([range.0, range.1]);
+    index
+}
+
+/// The pixels of `o` (its whole geometry: a map, or a block of one) in the layers
+/// and values of `index` (`run_index`), the elevation's colours over `range`.
+pub fn region_of(o: &Outcome, m: &Manifest, index: &MapIndex, range: (f32, f32)) -> Region {
+    let g = &o.geometry;
+    let n = (g.width * g.height) as usize;
+    let value = |name: &str| -> Vec<f32> {
+        let r = &o.raster;
+        match name {
+            "elevation" => super::elevation(o),
+            "class" => r
+                .class_ids
+                .as_raw()
+                .iter()
+                .zip(r.valid.as_raw())
+                .map(|(&c, &v)| if v != 0 { c as f32 } else { f32::NAN })
+                .collect(),
+            "confidence" => o.confidence.clone(),
+            "density" => o.density.clone(),
+            "error" => super::elevation_error(o).unwrap_or_else(|| vec![f32::NAN; n]),
+            _ => vec![f32::NAN; n],
+        }
     };
-    write_from(index, &src, report, &thumbnails(b), &mut |_, _| {})
+    Region {
+        width: g.width,
+        height: g.height,
+        rgba: index
+            .layers
+            .iter()
+            .map(|l| super::layer_rgba_in(o, m, l, range).unwrap_or_else(|| vec![0; 4 * n]))
+            .collect(),
+        values: index.values.iter().map(|v| value(v)).collect(),
+    }
 }
 
 fn invalid(field: &str, what: impl Into<String>) -> Problem {

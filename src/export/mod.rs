@@ -268,6 +268,12 @@ pub const LAYERS: [&str; 6] = [
 /// A layer as RGBA pixels for display (transparent where the map is empty), with the
 /// map's size; `None` for an unknown name or `error` without truth.
 pub fn layer_rgba(o: &Outcome, m: &Manifest, name: &str) -> Option<Vec<u8>> {
+    layer_rgba_in(o, m, name, range(&elevation(o)))
+}
+
+/// As `layer_rgba`, the elevation's colours spanning `range` (a block of a map
+/// takes the whole map's).
+pub fn layer_rgba_in(o: &Outcome, m: &Manifest, name: &str, range: (f32, f32)) -> Option<Vec<u8>> {
     let r = &o.raster;
     let (w, h) = (o.geometry.width, o.geometry.height);
     let valid = |i: usize| r.valid.as_raw()[i] != 0;
@@ -281,11 +287,7 @@ pub fn layer_rgba(o: &Outcome, m: &Manifest, name: &str) -> Option<Vec<u8>> {
     match name {
         "rgb" => Some(from_rgb(&r.rgb)),
         "semantic" => Some(from_rgb(&semantic_colours(m, &r.class_ids, &r.valid))),
-        "elevation" => {
-            let z = elevation(o);
-            let (lo, hi) = range(&z);
-            Some(from_values(&z, lo, hi))
-        }
+        "elevation" => Some(from_values(&elevation(o), range.0, range.1)),
         "confidence" => Some(from_rgb(
             &image::DynamicImage::from(grey(&o.confidence, w, h)).to_rgb8(),
         )),

@@ -25,11 +25,15 @@
 pub mod checkpoint;
 mod files;
 pub mod jobs;
+pub mod stitch;
+mod streamed;
 pub mod tile;
 
 pub use files::{
     finish_lazy, hold, start_files, start_lazy, step_lazy, tile_files, Fetch, Fetched,
 };
+pub use stitch::{Stitcher, Window};
+pub use streamed::StreamedMap;
 pub use tile::Tile;
 
 use crate::bev::BevGeometry;
@@ -41,8 +45,8 @@ use crate::init::align::AlignSummary;
 use crate::init::PosePlanes;
 use crate::optim::train::StepLoss;
 use crate::reconstruct::{
-    align_from, frame_xy, report, HoldoutSums, Layers, Outcome, ReconstructConfig,
-    ReconstructError, Session, UNSEEN_OPACITY_LOGIT,
+    align_from, frame_xy, report, HoldoutSums, Outcome, ReconstructConfig, ReconstructError,
+    Session, UNSEEN_OPACITY_LOGIT,
 };
 use crate::render::from_bundle::view_camera;
 use crate::render::Params;
@@ -216,159 +220,6 @@ fn sees(
     })
 }
 
-/// Blends tiles' layers into the map's.
-pub struct Stitcher {
-    pub geometry: BevGeometry,
-    channels: usize,
-    min_alpha: f32,
-    weight: Vec<f32>,
-    rgb: Vec<f32>,
-    logits: Vec<f32>,
-    elevation: Vec<f32>,
-    alpha: Vec<f32>,
-    confidence: Vec<f32>,
-    density: Vec<f32>,
-    /// Largest alpha below the floor where no tile was valid.
-    faint: Vec<f32>,
-}
-
-/// A tile's window of the map raster: its top-left pixel and its geometry.
-#[derive(Clone, Copy, Debug)]
-pub struct Window {
-    pub col: u32,
-    pub row: u32,
-    pub geometry: BevGeometry,
-}
-
-/// The map's layers may take this many times the surfel grid's memory budget.
-pub const MAP_BUDGET_PER_GRID_BUDGET: u64 = 4;
-
-impl Stitcher {
-    /// Host bytes of the blended layers of a map of geometry `g`.
-    pub fn bytes(g: &BevGeometry, channels: usize) -> u64 {
-        g.width as u64 * g.height as u64 * (11 + channels as u64) * 4
-    }
-
-    pub fn new(geometry: BevGeometry, channels: usize, min_alpha: f32) -> Self {
-        let n = geometry.width as usize * geometry.height as usize;
-        Self {
-            geometry,
-            channels,
-            min_alpha,
-            weight: vec![0.0; n],
-            rgb: vec![0.0; 3 * n],
-            logits: vec![0.0; channels * n],
-            elevation: vec![0.0; n],
-            alpha: vec![0.0; n],
-            confidence: vec![0.0; n],
-            density: vec![0.0; n],
-            faint: vec![0.0; n],
-        }
-    }
-
-    /// The window of the map's raster that covers `r` (`None` when they are apart).
-    pub fn window(&self, r: &Rect) -> Option<Window> {
-        let g = &self.geometry;
-        let res = g.resolution;
-        let c0 = ((r.min[0] - g.origin[0]) / res).floor().max(0.0) as u32;
-        let c1 = (((r.max[0] - g.origin[0]) / res).ceil().max(0.0) as u32).min(g.width);
-        let r0 = ((g.origin[1] - r.max[1]) / res).floor().max(0.0) as u32;
-        let r1 = (((g.origin[1] - r.min[1]) / res).ceil().max(0.0) as u32).min(g.height);
-        (c1 > c0 && r1 > r0).then(|| Window {
-            col: c0,
-            row: r0,
-            geometry: BevGeometry {
-                origin: [g.origin[0] + c0 as f64 * res, g.origin[1] - r0 as f64 * res],
-                resolution: res,
-                width: c1 - c0,
-                height: r1 - r0,
-            },
-        })
-    }
-
-    /// Adds a tile's layers over `w`. `blend`: the tile's rect and the width over
-    /// which its weight falls to zero at the rect's edges (`None`: weight 1).
-    pub fn add(&mut self, w: &Window, l: &Layers, blend: Option<(Rect, f64)>) {
-        let g = self.geometry;
-        let ch = self.channels;
-        let (tw, th) = (w.geometry.width, w.geometry.height);
-        for y in 0..th {
-            for x in 0..tw {
-                let li = (y * tw + x) as usize;
-                let gi = ((w.row + y) * g.width + w.col + x) as usize;
-                let a = l.bev.alpha[li];
-                if a.is_nan() || a < self.min_alpha {
-                    self.faint[gi] = self.faint[gi].max(if a.is_finite() { a } else { 0.0 });
-                    continue;
-                }
-                let wt = match blend {
-                    Some((r, width)) if width > 0.0 => {
-                        let px = g.origin[0] + ((w.col + x) as f64 + 0.5) * g.resolution;
-                        let py = g.origin[1] - ((w.row + y) as f64 + 0.5) * g.resolution;
-                        let dx = (px - r.min[0]).min(r.max[0] - px);
-                        let dy = (py - r.min[1]).min(r.max[1] - py);
-                        ((dx / width).clamp(1e-3, 1.0) * (dy / width).clamp(1e-3, 1.0)) as f32
-                    }
-                    _ => 1.0,
-                };
-                self.weight[gi] += wt;
-                for c in 0..3 {
-                    self.rgb[3 * gi + c] += wt * l.bev.rgb[3 * li + c];
-                }
-                for c in 0..ch {
-                    self.logits[ch * gi + c] += wt * l.bev.logits[ch * li + c];
-                }
-                self.elevation[gi] += wt * l.bev.elevation[li];
-                self.alpha[gi] += wt * a;
-                self.confidence[gi] += wt * l.confidence[li];
-                self.density[gi] += wt * l.density[li];
-            }
-        }
-    }
-
-    /// The blended layers (NaN confidence, density and elevation where no tile
-    /// rendered anything).
-    pub fn finish(self) -> Layers {
-        let g = self.geometry;
-        let n = (g.width * g.height) as usize;
-        let ch = self.channels;
-        let mut out = Layers {
-            bev: crate::bev::BevImage {
-                width: g.width,
-                height: g.height,
-                channels: ch,
-                rgb: self.rgb,
-                logits: self.logits,
-                elevation: self.elevation,
-                alpha: self.alpha,
-            },
-            confidence: self.confidence,
-            density: self.density,
-        };
-        for i in 0..n {
-            let w = self.weight[i];
-            if w > 0.0 {
-                for c in 0..3 {
-                    out.bev.rgb[3 * i + c] /= w;
-                }
-                for c in 0..ch {
-                    out.bev.logits[ch * i + c] /= w;
-                }
-                out.bev.elevation[i] /= w;
-                out.bev.alpha[i] /= w;
-                out.confidence[i] /= w;
-                out.density[i] /= w;
-            } else {
-                out.bev.alpha[i] = self.faint[i];
-                out.bev.elevation[i] = f32::NAN;
-                out.confidence[i] = f32::NAN;
-                out.density[i] = f32::NAN;
-            }
-        }
-        out
-    }
-}
-
 /// What one tile did (report.json's `tiles`).
 #[derive(Clone, Debug, Default, Serialize, serde::Deserialize)]
 pub struct TileReport {
@@ -446,7 +297,13 @@ pub struct TiledRun {
     /// The pose corrections between two tiles' sessions (each session holds them
     /// while it trains).
     poses: Option<crate::optim::pose::PoseRefiner>,
+    /// The map's whole layers would exceed the budget: it is written block by block
+    /// (`finish_streamed`), never whole.
+    pub streamed: bool,
 }
+
+/// The map's layers may take this many times the surfel grid's memory budget.
+pub const MAP_BUDGET_PER_GRID_BUDGET: u64 = 4;
 
 impl TiledRun {
     /// Aligns the poses (once, for every tile), plans the tiles and prepares the
@@ -519,6 +376,7 @@ impl TiledRun {
             fingerprint: 0,
             fault_tile: None,
             poses: None,
+            streamed: false,
             cfg,
         };
         match tiling {
@@ -547,19 +405,34 @@ impl TiledRun {
                 run.model_origin = [run.geometry.origin[0], run.geometry.origin[1], 0.0];
             }
         }
-        // The map's layers are held whole while tiles are stitched: refuse a map that
-        // would not fit before allocating it.
+        // The map's layers are held whole after stitching: a map whose whole layers
+        // would not fit is streamed (tiled, where the caller writes files), or refused
+        // before anything is allocated.
         let g = run.geometry;
         let bytes = Stitcher::bytes(&g, channels);
-        let budget = MAP_BUDGET_PER_GRID_BUDGET * run.cfg.prepare.grid.memory_budget;
+        let budget = run
+            .cfg
+            .map
+            .budget_bytes
+            .unwrap_or(MAP_BUDGET_PER_GRID_BUDGET * run.cfg.prepare.grid.memory_budget);
         if bytes > budget {
-            return Err(ReconstructError::MapTooLarge {
-                width: g.width,
-                height: g.height,
-                bytes,
-                budget,
-                resolution: g.resolution,
-            });
+            let probe = Stitcher::new(g, channels, min_alpha);
+            let windows: Vec<Window> = run
+                .tiles
+                .iter()
+                .filter_map(|t| probe.window(&t.rect))
+                .collect();
+            let held = Stitcher::block_bytes(&g, channels, windows.iter());
+            if !(run.cfg.map.stream && run.tiling.is_some() && held <= budget) {
+                return Err(ReconstructError::MapTooLarge {
+                    width: g.width,
+                    height: g.height,
+                    bytes,
+                    budget,
+                    resolution: g.resolution,
+                });
+            }
+            run.streamed = true;
         }
         run.stitch = Stitcher::new(run.geometry, channels, min_alpha);
         run.done = vec![false; run.tiles.len()];
@@ -568,9 +441,15 @@ impl TiledRun {
             .iter()
             .map(|t| (t.name(), t.views.clone()))
             .collect();
+        // How the map is held does not change it: runs that hold it differently
+        // resume each other's tiles.
+        let cfg = ReconstructConfig {
+            map: Default::default(),
+            ..run.cfg.clone()
+        };
         run.fingerprint = checkpoint::fnv1a(&[
             &serde_json::to_vec(&b.manifest).unwrap_or_default(),
-            format!("{:?}", run.cfg).as_bytes(),
+            format!("{cfg:?}").as_bytes(),
             format!("{:?} {:?} {plan:?}", run.tiling, run.geometry).as_bytes(),
         ]);
         Ok(run)
@@ -1032,17 +911,8 @@ impl TiledRun {
             return Ok(s.preview(&self.geometry).await?);
         }
         let g = self.geometry;
-        let (w, h) = (g.width as usize, g.height as usize);
-        let mut out = vec![0u8; w * h * 4];
-        for i in 0..w * h {
-            let wt = self.stitch.weight[i];
-            if wt > 0.0 {
-                let c = |k: usize| {
-                    ((self.stitch.rgb[3 * i + k] / wt).clamp(0.0, 1.0) * 255.0).round() as u8
-                };
-                out[4 * i..4 * i + 4].copy_from_slice(&[c(0), c(1), c(2), 255]);
-            }
-        }
+        let w = g.width as usize;
+        let mut out = self.stitch.preview();
         let tile = self.started.checked_sub(1).and_then(|k| self.tiles.get(k));
         if let (Some(t), false) = (tile, self.recorded) {
             if let Some(win) = self.stitch.window(&t.rect) {
@@ -1115,7 +985,7 @@ impl TiledRun {
                 "surfels": sum(|t| t.surfels),
                 "added_surfels": sum(|t| t.added_surfels),
                 "base_surfels": sum(|t| t.surfels) - sum(|t| t.added_surfels),
-                "model_surfels": o.params.len(),
+                "model_surfels": self.model.len(),
             });
             r["steps"] = steps.into();
             r["training_views"] = sum(|t| t.training_views).into();
@@ -1167,58 +1037,77 @@ pub struct Seams {
 
 /// The seam statistics of a map raster cut by tiles of `tile_m` metres.
 pub fn seams(r: &BevRaster, tile_m: f64) -> Seams {
-    // Sums per class of line: 0 borders (offset 0), 1 inside (offset half a tile).
-    let mut acc = [(0usize, 0.0f64, 0.0f64); 2];
-    let res = r.resolution;
-    let mut pair = |kind: usize, a: (u32, u32), b: (u32, u32)| {
-        if !(r.is_valid(a.0, a.1) && r.is_valid(b.0, b.1)) {
-            return;
+    let mut s = SeamSums::default();
+    s.add(r, tile_m);
+    s.seams()
+}
+
+/// The sums of `Seams`, added up over rasters (the blocks of a streamed map: pairs
+/// across two blocks are not counted there).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SeamSums {
+    /// Per class of line: 0 borders (offset 0), 1 inside (offset half a tile):
+    /// pairs, sum of |Δ elevation|, sum of |Δ colour|.
+    acc: [(usize, f64, f64); 2],
+}
+
+impl SeamSums {
+    pub fn add(&mut self, r: &BevRaster, tile_m: f64) {
+        let acc = &mut self.acc;
+        let res = r.resolution;
+        let mut pair = |kind: usize, a: (u32, u32), b: (u32, u32)| {
+            if !(r.is_valid(a.0, a.1) && r.is_valid(b.0, b.1)) {
+                return;
+            }
+            let dz = (r.elevation_at(a.0, a.1) - r.elevation_at(b.0, b.1)).abs() as f64;
+            let (pa, pb) = (r.rgb.get_pixel(a.0, a.1).0, r.rgb.get_pixel(b.0, b.1).0);
+            let dc = (0..3)
+                .map(|c| (pa[c] as f64 - pb[c] as f64).abs() / 255.0)
+                .sum::<f64>()
+                / 3.0;
+            acc[kind].0 += 1;
+            acc[kind].1 += dz;
+            acc[kind].2 += dc;
+        };
+        // Which line class, if any, passes between pixel centres at world u and u + res.
+        let kind_between = |u: f64| -> Option<usize> {
+            let k0 = ((u) / (tile_m / 2.0)).floor();
+            let k1 = ((u + res) / (tile_m / 2.0)).floor();
+            (k1 > k0).then(|| (k1.rem_euclid(2.0) != 0.0) as usize)
+        };
+        for row in 0..r.height {
+            for col in 0..r.width.saturating_sub(1) {
+                let x = r.origin[0] + (col as f64 + 0.5) * res;
+                if let Some(k) = kind_between(x) {
+                    pair(k, (col, row), (col + 1, row));
+                }
+            }
         }
-        let dz = (r.elevation_at(a.0, a.1) - r.elevation_at(b.0, b.1)).abs() as f64;
-        let (pa, pb) = (r.rgb.get_pixel(a.0, a.1).0, r.rgb.get_pixel(b.0, b.1).0);
-        let dc = (0..3)
-            .map(|c| (pa[c] as f64 - pb[c] as f64).abs() / 255.0)
-            .sum::<f64>()
-            / 3.0;
-        acc[kind].0 += 1;
-        acc[kind].1 += dz;
-        acc[kind].2 += dc;
-    };
-    // Which line class, if any, passes between pixel centres at world u and u + res.
-    let kind_between = |u: f64| -> Option<usize> {
-        let k0 = ((u) / (tile_m / 2.0)).floor();
-        let k1 = ((u + res) / (tile_m / 2.0)).floor();
-        (k1 > k0).then(|| (k1.rem_euclid(2.0) != 0.0) as usize)
-    };
-    for row in 0..r.height {
-        for col in 0..r.width.saturating_sub(1) {
-            let x = r.origin[0] + (col as f64 + 0.5) * res;
-            if let Some(k) = kind_between(x) {
-                pair(k, (col, row), (col + 1, row));
+        for row in 0..r.height.saturating_sub(1) {
+            // Row + 1 lies south: its y is smaller.
+            let y = r.origin[1] - (row as f64 + 1.5) * res;
+            if let Some(k) = kind_between(y) {
+                for col in 0..r.width {
+                    pair(k, (col, row + 1), (col, row));
+                }
             }
         }
     }
-    for row in 0..r.height.saturating_sub(1) {
-        // Row + 1 lies south: its y is smaller.
-        let y = r.origin[1] - (row as f64 + 1.5) * res;
-        if let Some(k) = kind_between(y) {
-            for col in 0..r.width {
-                pair(k, (col, row + 1), (col, row));
-            }
+
+    pub fn seams(&self) -> Seams {
+        let mean = |a: (usize, f64, f64)| {
+            let n = a.0.max(1) as f64;
+            (a.1 / n, a.2 / n)
+        };
+        let (b, i) = (mean(self.acc[0]), mean(self.acc[1]));
+        Seams {
+            border_pairs: self.acc[0].0,
+            border_elevation_step_m: b.0,
+            border_rgb_step: b.1,
+            inside_pairs: self.acc[1].0,
+            inside_elevation_step_m: i.0,
+            inside_rgb_step: i.1,
         }
-    }
-    let mean = |a: (usize, f64, f64)| {
-        let n = a.0.max(1) as f64;
-        (a.1 / n, a.2 / n)
-    };
-    let (b, i) = (mean(acc[0]), mean(acc[1]));
-    Seams {
-        border_pairs: acc[0].0,
-        border_elevation_step_m: b.0,
-        border_rgb_step: b.1,
-        inside_pairs: acc[1].0,
-        inside_elevation_step_m: i.0,
-        inside_rgb_step: i.1,
     }
 }
 

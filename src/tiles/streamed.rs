@@ -1,0 +1,170 @@
+//! A map too large for whole-image layers (`TiledRun::streamed`), finished block by
+//! block: each `BLOCK`-pixel block of the blend becomes the outcome of its own small
+//! window (`Outcome::block`), whose pixels go straight into map.rogsmap's level-0
+//! tile of the same place, and whose sums (PSNR, IoU, seams, the elevation range)
+//! add up to the whole map's. Nothing the size of the map's bounding box is ever
+//! allocated; the blend holds the blocks the drive covers.
+
+use super::stitch::{Stitcher, BLOCK};
+use super::{SeamSums, TiledRun};
+use crate::bev::BevImage;
+use crate::bundle::{Bundle, Manifest};
+use crate::eval::{elevation_vs_raster, BevRaster, Tally};
+use crate::export::map_file::{self, MapIndex, MapSource, Region};
+use crate::reconstruct::{road_channels, Outcome, ReconstructError};
+use crate::render::Params;
+use web_time::Instant;
+
+/// A streamed map: the map file and the report it holds.
+pub struct StreamedMap {
+    pub map: Vec<u8>,
+    pub report: serde_json::Value,
+    pub outcome: Outcome,
+}
+
+/// The blend's blocks as a map source: block (bx, by) is level-0 tile (bx, by).
+struct BlockSource<'a> {
+    stitch: &'a Stitcher,
+    truth: Option<&'a BevRaster>,
+    road: &'a [(usize, u8)],
+    min_alpha: f32,
+    manifest: &'a Manifest,
+    index: &'a MapIndex,
+    range: (f32, f32),
+}
+
+impl BlockSource<'_> {
+    fn outcome(&self, bx: u32, by: u32) -> Option<Outcome> {
+        let (w, layers) = self.stitch.block(bx, by)?;
+        Some(Outcome::block(
+            w.geometry,
+            layers,
+            self.truth,
+            self.road,
+            self.min_alpha,
+        ))
+    }
+}
+
+impl MapSource for BlockSource<'_> {
+    fn region(&self, x0: u32, y0: u32, w: u32, h: u32) -> Result<Option<Region>, String> {
+        if !x0.is_multiple_of(BLOCK) || !y0.is_multiple_of(BLOCK) || w > BLOCK || h > BLOCK {
+            return Err(format!(
+                "map tiles of {w}×{h} px at ({x0}, {y0}) do not fall on the blend's {BLOCK}-px blocks"
+            ));
+        }
+        Ok(self
+            .outcome(x0 / BLOCK, y0 / BLOCK)
+            .map(|o| map_file::region_of(&o, self.manifest, self.index, self.range)))
+    }
+}
+
+impl TiledRun {
+    /// The map of a run whose whole layers would not fit (`streamed`), written block
+    /// by block: map.rogsmap with every layer, and report.json (metrics against the
+    /// truth summed over the blocks; seams over neighbouring pixels of one block).
+    /// `progress(done, total)` counts blocks twice: scoring, then writing.
+    pub async fn finish_streamed(
+        &mut self,
+        b: &Bundle,
+        bundle: &str,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<StreamedMap, ReconstructError> {
+        if self.session.is_some() && !self.recorded && self.failed.is_none() {
+            self.record(b).await?;
+        }
+        let t = Instant::now();
+        let road = road_channels(b);
+        let m = &b.manifest;
+        let mut src = BlockSource {
+            stitch: &self.stitch,
+            truth: self.truth.as_ref(),
+            road: &road,
+            min_alpha: self.cfg.train.loss.min_alpha,
+            manifest: m,
+            index: &map_file::run_index(m, &self.geometry, false, (0.0, 1.0)),
+            range: (0.0, 1.0),
+        };
+        // Pass 1: the sums, and the elevation's range the layer's colours span.
+        let blocks = self.stitch.blocks();
+        let mut tally = Tally::default();
+        let mut seams = SeamSums::default();
+        let (mut lo, mut hi) = (f32::MAX, f32::MIN);
+        for (k, &(bx, by)) in blocks.iter().enumerate() {
+            progress(k, 2 * blocks.len());
+            let Some(o) = src.outcome(bx, by) else {
+                continue;
+            };
+            for z in crate::export::elevation(&o)
+                .into_iter()
+                .filter(|z| z.is_finite())
+            {
+                (lo, hi) = (lo.min(z), hi.max(z));
+            }
+            if let Some(t) = &o.truth {
+                tally.add(&o.raster, t);
+            }
+            if let Some(c) = self.tiling {
+                seams.add(&o.raster, c.size_m);
+            }
+        }
+        let range = if lo > hi { (0.0, 1.0) } else { (lo, hi) };
+        let road_ids = crate::eval::road_classes(m);
+        let metrics = self
+            .truth
+            .as_ref()
+            .map(|t| tally.metrics(&road_ids, elevation_vs_raster(&self.centres, t)));
+        // The report reads the map's geometry, metrics and held-out scores.
+        let g = self.geometry;
+        let outcome = Outcome {
+            params: Params::default(),
+            geometry: g,
+            bev: BevImage {
+                width: 0,
+                height: 0,
+                channels: self.model.channels,
+                rgb: Vec::new(),
+                logits: Vec::new(),
+                elevation: Vec::new(),
+                alpha: Vec::new(),
+            },
+            raster: BevRaster::empty(g.origin, g.resolution, 0, 0),
+            confidence: Vec::new(),
+            density: Vec::new(),
+            truth: None,
+            metrics,
+            holdout: self.holdout.holdout(self.holdout_views),
+        };
+        let mut report = self.report(b, &outcome, bundle);
+        report["seams"] = serde_json::to_value(seams.seams()).unwrap_or_default();
+        report["map_layers"] = serde_json::json!({
+            "streamed": true,
+            "blocks": blocks.len(),
+            "block_px": BLOCK,
+            "held_bytes": self.stitch.held_bytes(),
+            "whole_layers_bytes": Stitcher::bytes(&g, self.model.channels),
+        });
+        // Pass 2: the map file, each level-0 tile from its block.
+        let index = map_file::run_index(m, &g, self.truth.is_some(), range);
+        src.index = &index;
+        src.range = range;
+        let bytes = serde_json::to_vec_pretty(&report)
+            .map_err(|e| ReconstructError::Write(e.to_string()))?;
+        let n = blocks.len();
+        let map = map_file::write_from(
+            index.clone(),
+            &src,
+            &bytes,
+            &map_file::thumbnails(b),
+            &mut |d, total| progress(n + d * n / total.max(1), 2 * n),
+        )
+        .map_err(ReconstructError::Write)?;
+        self.eval_ms = t.elapsed().as_secs_f64() * 1e3;
+        report["timings"]["eval_ms"] = self.eval_ms.into();
+        Ok(StreamedMap {
+            map,
+            report,
+            outcome,
+        })
+    }
+}

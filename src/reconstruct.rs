@@ -566,6 +566,21 @@ impl Session {
     }
 
     /// Centres of the surfels some training view saw, in world coordinates.
+    /// Σ (initial z − truth)² and count over surfels `seen`, where the truth is
+    /// valid: the initial surface at the centres the metrics score.
+    pub fn initial_error(&self, seen: &[usize], truth: &BevRaster) -> (f64, usize) {
+        let (mut se, mut n) = (0.0, 0);
+        for &k in seen {
+            let q = self.initial.pos[k].map(|v| v as f64);
+            let (x, y) = (q[0] + self.origin[0], q[1] + self.origin[1]);
+            if let Some(z) = truth.elevation_xy(x, y) {
+                se += (q[2] + self.origin[2] - z).powi(2);
+                n += 1;
+            }
+        }
+        (se, n)
+    }
+
     pub fn centres(&self, p: &Params<f32>) -> Vec<[f64; 3]> {
         p.pos
             .iter()
@@ -708,8 +723,15 @@ impl Session {
         self.timings.bev_ms = t.elapsed().as_secs_f64() * 1e3;
         let t = Instant::now();
         let centres = self.centres(&p);
+        let seen: Vec<usize> = (0..p.len())
+            .filter(|&k| p.opacity[k] > UNSEEN_OPACITY_LOGIT + 1.0)
+            .collect();
+        let initial = truth.as_ref().map(|t| self.initial_error(&seen, t));
         let holdout = self.holdout(b).await?;
-        let o = Outcome::assemble(b, p, g, layers, truth, &centres, holdout, self.min_alpha())?;
+        let mut o = Outcome::assemble(b, p, g, layers, truth, &centres, holdout, self.min_alpha())?;
+        if let (Some(m), Some((se, n))) = (o.metrics.as_mut(), initial) {
+            m.initial_elevation_rmse_m = (n > 0).then(|| (se / n as f64).sqrt());
+        }
         self.timings.eval_ms = t.elapsed().as_secs_f64() * 1e3;
         Ok(o)
     }
@@ -796,7 +818,10 @@ impl Outcome {
         min_alpha: f32,
     ) -> Result<Self, ReconstructError> {
         let raster = bev::to_raster(&layers.bev, &g, &road_channels(b), min_alpha);
-        let metrics = crate::eval::score(b, truth.as_ref(), &raster, centres, g.resolution)?;
+        let mut metrics = crate::eval::score(b, truth.as_ref(), &raster, centres, g.resolution)?;
+        if let (Some(m), Some(t)) = (metrics.as_mut(), &truth) {
+            m.vs_reference = crate::eval::vs_reference(b, t, &raster)?;
+        }
         Ok(Outcome {
             params,
             geometry: g,

@@ -120,9 +120,14 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
             .as_ref()
             .ok_or("give --pred DIR (a predicted BEV map) or --pseudo-gt")?;
         let (pred, points) = load_pred(dir)?;
-        crate::eval::score(&bundle, truth.as_ref(), &pred, &points, a.resolution)
+        let mut m = crate::eval::score(&bundle, truth.as_ref(), &pred, &points, a.resolution)
             .map_err(|e| e.to_string())?
-            .ok_or("the bundle has neither ground truth nor LiDAR: nothing to evaluate against")?
+            .ok_or("the bundle has neither ground truth nor LiDAR: nothing to evaluate against")?;
+        if let Some(t) = &truth {
+            m.vs_reference =
+                crate::eval::vs_reference(&bundle, t, &pred).map_err(|e| e.to_string())?;
+        }
+        m
     };
     println!(
         "{}",

@@ -16,6 +16,27 @@ pub struct Metrics {
     /// IoU of each road class (by class id) that `miou` averages.
     #[serde(skip_serializing_if = "std::collections::BTreeMap::is_empty")]
     pub iou_per_class: std::collections::BTreeMap<u8, f64>,
+    /// Elevation RMSE of the initial surface at the same surfel centres, before
+    /// any training (with truth).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub initial_elevation_rmse_m: Option<f64>,
+    /// The map and the exact-pose LiDAR reference over the reference's cells
+    /// (`eval::vs_reference`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vs_reference: Option<VsReference>,
+}
+
+/// The map against the best map the paper's own procedure makes from the same
+/// inputs with perfect poses: the LiDAR pseudo-ground-truth through the exact poses.
+/// Both are scored against the truth over the reference's cells.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct VsReference {
+    /// Truth cells the reference covers.
+    pub cells: usize,
+    pub map_psnr_db: Option<f64>,
+    pub map_miou: Option<f64>,
+    pub ref_psnr_db: Option<f64>,
+    pub ref_miou: Option<f64>,
 }
 
 /// PSNR (dB, peak 1.0) of `pred` against `truth` over pixels valid in both. Both
@@ -128,6 +149,7 @@ impl Tally {
             elevation_rmse_m: e.map(|e| e.rmse),
             elevation_mae_m: e.map(|e| e.mae),
             elevation_p95_m: e.map(|e| e.p95),
+            ..Default::default()
         }
     }
 }

@@ -6,7 +6,7 @@ pub mod raster;
 
 pub use metrics::{
     class_iou, elevation_vs_points, elevation_vs_raster, error_stats, miou, psnr, ErrorStats,
-    Metrics, Tally,
+    Metrics, Tally, VsReference,
 };
 pub use raster::BevRaster;
 
@@ -61,4 +61,48 @@ pub fn score(
     m.elevation_mae_m = e.map(|e| e.mae);
     m.elevation_p95_m = e.map(|e| e.p95);
     Ok(Some(m))
+}
+
+/// The map `pred` against the exact-pose reference (`VsReference`), when the bundle
+/// keeps its exact poses (`ground_truth.poses`) and has LiDAR; `None` otherwise, or
+/// when a lazily read bundle does not hold every sweep and image. Per-view poses are
+/// replaced by their frame's exact pose.
+pub fn vs_reference(
+    b: &Bundle,
+    truth: &BevRaster,
+    pred: &BevRaster,
+) -> Result<Option<VsReference>, Problem> {
+    if b.manifest.lidar.is_none() {
+        return Ok(None);
+    }
+    let Some(poses) = b.read_true_poses()? else {
+        return Ok(None);
+    };
+    let mut m = b.manifest.clone();
+    for (f, p) in m.frames.iter_mut().zip(&poses) {
+        f.vehicle_to_world = *p;
+        for v in &mut f.views {
+            v.vehicle_to_world = None;
+        }
+    }
+    let cloud = match pseudo_gt::lidar_cloud_in(b, &m) {
+        Err(Problem::NotLoaded { .. }) => return Ok(None),
+        r => r?,
+    };
+    let reference = pseudo_gt::rasterise(&cloud, truth);
+    let mut cells = truth.clone();
+    for (v, r) in cells.valid.pixels_mut().zip(reference.valid.pixels()) {
+        if r.0[0] == 0 {
+            v.0[0] = 0;
+        }
+    }
+    let road = road_classes(&b.manifest);
+    let (map, refr) = (Tally::of(pred, &cells), Tally::of(&reference, &cells));
+    Ok(Some(VsReference {
+        cells: cells.valid.pixels().filter(|p| p.0[0] != 0).count(),
+        map_psnr_db: map.psnr(),
+        map_miou: map.miou(&road),
+        ref_psnr_db: refr.psnr(),
+        ref_miou: refr.miou(&road),
+    }))
 }

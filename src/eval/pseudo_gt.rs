@@ -21,7 +21,12 @@ pub struct LidarCloud {
 const WINDOW: usize = 20;
 
 pub fn lidar_cloud(b: &Bundle) -> Result<LidarCloud, Problem> {
-    let m = &b.manifest;
+    lidar_cloud_in(b, &b.manifest)
+}
+
+/// As `lidar_cloud`, through the poses of `m` (the bundle's manifest with other
+/// poses: the exact ones of a synthetic drive) and the files of `b`.
+pub fn lidar_cloud_in(b: &Bundle, m: &crate::bundle::Manifest) -> Result<LidarCloud, Problem> {
     let Some(sensor) = &m.lidar else {
         return Ok(LidarCloud::default());
     };
@@ -49,7 +54,7 @@ pub fn lidar_cloud(b: &Bundle) -> Result<LidarCloud, Problem> {
             };
             order.sort_by(|a, b| dist(*a).total_cmp(&dist(*b)));
             if let Some((rgb, label)) =
-                colour_point(b, &order[..order.len().min(3)], w, &ignore, &mut cache)?
+                colour_point(b, m, &order[..order.len().min(3)], w, &ignore, &mut cache)?
             {
                 if label != IGNORED {
                     cloud.points.push(w);
@@ -72,12 +77,12 @@ const IGNORE_DILATION: i64 = 2;
 /// first frame in `frames` that sees it; `IGNORED` near ignore-class pixels.
 fn colour_point(
     b: &Bundle,
+    m: &crate::bundle::Manifest,
     frames: &[usize],
     w: [f64; 3],
     ignore: &[bool],
     cache: &mut HashMap<String, (image::RgbImage, image::GrayImage)>,
 ) -> Result<Option<([u8; 3], u8)>, Problem> {
-    let m = &b.manifest;
     for &j in frames {
         let f = &m.frames[j];
         let mut best: Option<(f64, usize, u32, u32)> = None;

@@ -35,6 +35,9 @@ pub struct Finished {
     pub centres: Vec<[f64; 3]>,
     /// Σ Δz² and count over the core surfels (report's `z_change_rms_m`).
     pub z_change: (f64, usize),
+    /// Σ (initial z − truth)² and count over `centres` where the truth is valid
+    /// (metrics' `initial_elevation_rmse_m`).
+    pub initial_error: (f64, usize),
     pub holdout: HoldoutSums,
     pub holdout_views: usize,
 }
@@ -58,6 +61,8 @@ struct Header {
     channels: usize,
     centres: usize,
     z_change: (f64, usize),
+    #[serde(default)]
+    initial_error: (f64, usize),
     holdout_se: f64,
     holdout_se_ipm: f64,
     holdout_n: u64,
@@ -100,6 +105,7 @@ pub fn encode(f: &Finished, fingerprint: u64) -> Result<Vec<u8>, String> {
         channels: f.model.channels,
         centres: f.centres.len(),
         z_change: f.z_change,
+        initial_error: f.initial_error,
         holdout_se: f.holdout.se,
         holdout_se_ipm: f.holdout.se_ipm,
         holdout_n: f.holdout.n,
@@ -221,6 +227,7 @@ pub fn decode(bytes: &[u8]) -> Result<(Finished, u64), String> {
         model,
         centres,
         z_change: h.z_change,
+        initial_error: h.initial_error,
         holdout: HoldoutSums {
             se: h.holdout_se,
             se_ipm: h.holdout_se_ipm,

@@ -275,6 +275,7 @@ pub struct TiledRun {
     holdout: HoldoutSums,
     holdout_views: usize,
     z_change: (f64, usize),
+    initial_error: (f64, usize),
     ctx: GpuContext,
     steps_done: usize,
     planned_steps: usize,
@@ -364,6 +365,7 @@ impl TiledRun {
             holdout: HoldoutSums::default(),
             holdout_views: 0,
             z_change: (0.0, 0),
+            initial_error: (0.0, 0),
             ctx,
             steps_done: 0,
             planned_steps: 0,
@@ -642,11 +644,18 @@ impl TiledRun {
             done.z_change.0 += dz * dz;
         }
         done.z_change.1 = keep.len();
-        done.centres = keep
+        let seen: Vec<usize> = keep
             .iter()
-            .filter(|&&k| p.opacity[k] > UNSEEN_OPACITY_LOGIT + 1.0)
+            .copied()
+            .filter(|&k| p.opacity[k] > UNSEEN_OPACITY_LOGIT + 1.0)
+            .collect();
+        done.centres = seen
+            .iter()
             .map(|&k| [0, 1, 2].map(|c| p.pos[k][c] as f64 + s.origin[c]))
             .collect();
+        if let Some(t) = &self.truth {
+            done.initial_error = s.initial_error(&seen, t);
+        }
         if let Some(w) = window {
             done.layers = Some(s.layers(&p, &w.geometry, &mut |_, _| {}).await?);
         }
@@ -711,6 +720,8 @@ impl TiledRun {
         append(&mut self.model, &f.model, &all, shift);
         self.z_change.0 += f.z_change.0;
         self.z_change.1 += f.z_change.1;
+        self.initial_error.0 += f.initial_error.0;
+        self.initial_error.1 += f.initial_error.1;
         self.centres.extend_from_slice(&f.centres);
         self.holdout.merge(&f.holdout);
         self.holdout_views += f.holdout_views;
@@ -879,7 +890,7 @@ impl TiledRun {
         let stitch = std::mem::replace(&mut self.stitch, Stitcher::new(g, channels, min_alpha));
         let layers = stitch.finish();
         let holdout = self.holdout.holdout(self.holdout_views);
-        let o = Outcome::assemble(
+        let mut o = Outcome::assemble(
             b,
             self.model.clone(),
             g,
@@ -889,11 +900,21 @@ impl TiledRun {
             holdout,
             min_alpha,
         )?;
+        if let Some(m) = o.metrics.as_mut() {
+            m.initial_elevation_rmse_m = self.initial_rmse();
+        }
         self.eval_ms = t.elapsed().as_secs_f64() * 1e3;
         if let Some(s) = self.session.as_mut() {
             s.timings.eval_ms = self.eval_ms;
         }
         Ok(o)
+    }
+
+    /// The initial surface's elevation RMSE against the truth at the finished tiles'
+    /// surfel centres.
+    fn initial_rmse(&self) -> Option<f64> {
+        let (se, n) = self.initial_error;
+        (n > 0).then(|| (se / n as f64).sqrt())
     }
 
     /// The current map colour as RGBA over the map's geometry, while training: the

@@ -110,10 +110,11 @@ impl TiledRun {
         }
         let range = if lo > hi { (0.0, 1.0) } else { (lo, hi) };
         let road_ids = crate::eval::road_classes(m);
-        let metrics = self
-            .truth
-            .as_ref()
-            .map(|t| tally.metrics(&road_ids, elevation_vs_raster(&self.centres, t)));
+        let metrics = self.truth.as_ref().map(|t| {
+            let mut m = tally.metrics(&road_ids, elevation_vs_raster(&self.centres, t));
+            m.initial_elevation_rmse_m = self.initial_rmse();
+            m
+        });
         // The report reads the map's geometry, metrics and held-out scores.
         let g = self.geometry;
         let outcome = Outcome {

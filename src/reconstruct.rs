@@ -46,10 +46,9 @@ pub enum ReconstructError {
     NoViews,
     #[error(
         "the map would be {width}×{height} px at {resolution} m, {mib} MiB of layers, over the budget of {budget_mib} MiB; \
-         use a coarser resolution (--resolution; twice as coarse needs a quarter), map it in tiles (--tile-m: \
-         natively, a tiled map too large for whole layers is written tile by tile into map.rogsmap), \
+         use a coarser resolution (--resolution; twice as coarse needs a quarter), {tiles}\
          or map the drive in parts of a few km",
-        mib = bytes >> 20, budget_mib = budget >> 20
+        mib = bytes >> 20, budget_mib = budget >> 20, tiles = tiles_advice(*blocks)
     )]
     MapTooLarge {
         width: u32,
@@ -57,6 +56,8 @@ pub enum ReconstructError {
         bytes: u64,
         budget: u64,
         resolution: f64,
+        /// Bytes of the blocks the drive covers, when the map could have streamed.
+        blocks: Option<u64>,
     },
     #[error(
         "camera {camera}'s images are {width}×{height} px: a view's per-pixel buffers would take {mib} MiB, \
@@ -146,6 +147,19 @@ pub fn aligns(cfg: &ReconstructConfig) -> Option<&AlignConfig> {
     cfg.align
         .as_ref()
         .filter(|_| cfg.train.use_lidar && cfg.prepare.use_lidar)
+}
+
+/// `MapTooLarge`'s advice on tiles: where the map could stream, what its blocks need.
+fn tiles_advice(blocks: Option<u64>) -> String {
+    match blocks {
+        Some(b) => format!(
+            "raise --map-memory-mib above the {} MiB the map's blocks along the drive need, ",
+            b.div_ceil(1 << 20)
+        ),
+        None => "map it in tiles (--tile-m: natively, a tiled map too large for whole layers \
+                 is written tile by tile into map.rogsmap), "
+            .into(),
+    }
 }
 
 impl ReconstructError {

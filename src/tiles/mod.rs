@@ -432,6 +432,7 @@ impl TiledRun {
                     bytes,
                     budget,
                     resolution: g.resolution,
+                    blocks: (run.cfg.map.stream && run.tiling.is_some()).then_some(held),
                 });
             }
             run.streamed = true;

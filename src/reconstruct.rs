@@ -423,7 +423,7 @@ impl Session {
                 .poses
                 .clone()
                 .filter(|_| !cfg.baseline_ipm)
-                .map(|c| PoseRefiner::new(m.frames.len(), c)),
+                .map(|c| PoseRefiner::new(m.frames.len(), m.cameras.len(), c)),
             prepare_report: prepared.report,
             level: prepared.grid.level.clone(),
             grid: prepared.grid,
@@ -484,11 +484,11 @@ impl Session {
         // start step on, the gradient about the corrected vehicle position.
         let mut pose_centre = None;
         let mut progress = 0.0;
+        let x = &b.manifest.frames[v.frame].vehicle_to_world;
         if let Some(r) = &self.poses {
-            let c = r.correction(v.frame);
-            let x = &b.manifest.frames[v.frame].vehicle_to_world;
+            let [rig, c] = r.view(v.frame, v.camera, x);
             let at = [0, 1, 2].map(|k| x[k][3] - self.origin[k]);
-            cam = c.apply(&cam, at);
+            cam = c.apply(&rig.apply(&cam, at), at);
             let start = (r.cfg.start * self.total_steps() as f64).floor() as usize;
             if self.steps_done() >= start {
                 pose_centre = Some([0, 1, 2].map(|k| (at[k] + c.tau[k]) as f32));
@@ -505,6 +505,7 @@ impl Session {
             Ok((l, pose)) => {
                 if let (Some(r), Some(g)) = (&mut self.poses, pose) {
                     r.update(v.frame, g, progress);
+                    r.update_rig(v.camera, g, x, progress);
                 }
                 self.losses.push(l);
                 Ok(Some(l))

@@ -86,6 +86,9 @@ pub struct Settings {
     /// Refine x, y and yaw only; default: when the poses are aligned to the LiDAR.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pose_planar: Option<bool>,
+    /// Also refine each camera's mounting on the vehicle (rig offsets).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pose_rig: Option<bool>,
     /// Host memory the map's whole layers may take, MiB (default: 8 GiB).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub map_memory_mib: Option<u64>,
@@ -206,6 +209,7 @@ impl Settings {
             // refine what it cannot see.
             let aligned = c.align.is_some() && lidar && m.lidar.is_some();
             p.planar = self.pose_planar.unwrap_or(aligned);
+            p.rig = self.pose_rig.unwrap_or(false);
             c.poses = Some(p);
         }
         c.map.budget_bytes =

@@ -155,6 +155,11 @@ pub struct SettingsArgs {
     /// Refine all six degrees of freedom even where the LiDAR alignment ran.
     #[arg(long, requires = "refine_poses")]
     pose_all: bool,
+    /// Also refine each camera's mounting on the vehicle (its camera_to_vehicle),
+    /// one correction per camera shared by every frame: for a rig whose calibration
+    /// is off. poses_refined.json then lists the corrected mountings.
+    #[arg(long, requires = "refine_poses")]
+    pose_rig: bool,
     /// Host memory the map's whole layers may take, MiB (default 8192). A tiled map
     /// whose whole layers would need more is written tile by tile into map.rogsmap
     /// (every layer, at every zoom; no whole-image PNG or GeoTIFF layers), holding
@@ -203,6 +208,7 @@ impl SettingsArgs {
                 .then_some(true)
                 .or(a.pose_all.then_some(false)),
             map_memory_mib: a.map_memory_mib,
+            pose_rig: Some(a.pose_rig),
         }
     }
 }

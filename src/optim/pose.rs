@@ -41,6 +41,9 @@ pub struct PoseConfig {
     pub start: f64,
     /// Only x, y and yaw move (what the LiDAR alignment cannot see); else all six.
     pub planar: bool,
+    /// Also learn one correction per camera of its mounting on the vehicle (the
+    /// rig's extrinsics), shared by every frame, all six degrees of freedom.
+    pub rig: bool,
 }
 
 impl Default for PoseConfig {
@@ -53,6 +56,7 @@ impl Default for PoseConfig {
             decay: 0.0,
             start: 0.1,
             planar: false,
+            rig: false,
         }
     }
 }
@@ -73,6 +77,23 @@ impl Correction {
         let t = [0, 1, 2]
             .map(|i| centre[i] + self.tau[i] - (0..3).map(|k| r[i][k] * centre[k]).sum::<f64>());
         mat(r, t)
+    }
+
+    /// The correction of a camera's mounting (`self` in the vehicle's frame, about
+    /// its origin) as a correction in the world about the vehicle's position, for
+    /// the vehicle pose `v2w`: V δ V⁻¹.
+    pub fn rig_in_world(&self, v2w: &Mat4Rows) -> Correction {
+        let r = |v: [f64; 3]| [0, 1, 2].map(|i| (0..3).map(|k| v2w[i][k] * v[k]).sum::<f64>());
+        Correction {
+            omega: r(self.omega),
+            tau: r(self.tau),
+        }
+    }
+
+    /// The corrected camera-to-vehicle transform of a camera mounted at `c2v`:
+    /// δ ∘ c2v (`self` in the vehicle's frame).
+    pub fn apply_to_mount(&self, c2v: &Mat4Rows) -> Mat4Rows {
+        mul(&mat(exp_so3(self.omega), self.tau), c2v)
     }
 
     /// The corrected vehicle-to-world pose: ΔT ∘ pose.
@@ -221,6 +242,11 @@ pub struct PoseRefiner {
     scale: [f64; 6],
     scale_updates: u32,
     updates: Vec<u32>,
+    /// With `cfg.rig`: per camera, the correction of its mounting (vehicle frame),
+    /// Adam's moments and the updates it has had.
+    pub rig: Vec<Correction>,
+    rig_adam: Vec<([f64; 6], [f64; 6])>,
+    rig_updates: Vec<u32>,
 }
 
 const BETA1: f64 = 0.9;
@@ -228,7 +254,8 @@ const BETA2: f64 = 0.999;
 const EPS: f64 = 1e-12;
 
 impl PoseRefiner {
-    pub fn new(frames: usize, cfg: PoseConfig) -> Self {
+    pub fn new(frames: usize, cameras: usize, cfg: PoseConfig) -> Self {
+        let cameras = if cfg.rig { cameras } else { 0 };
         Self {
             cfg,
             corrections: vec![Correction::default(); frames],
@@ -236,7 +263,44 @@ impl PoseRefiner {
             scale: [0.0; 6],
             scale_updates: 0,
             updates: vec![0; frames],
+            rig: vec![Correction::default(); cameras],
+            rig_adam: vec![([0.0; 6], [0.0; 6]); cameras],
+            rig_updates: vec![0; cameras],
         }
+    }
+
+    /// The correction of a view of `camera` in `frame` (vehicle pose `v2w`), in the
+    /// world about the vehicle's position: the frame's after its camera's mounting.
+    pub fn view(&self, frame: usize, camera: usize, v2w: &Mat4Rows) -> [Correction; 2] {
+        let rig = self.rig.get(camera).copied().unwrap_or_default();
+        [rig.rig_in_world(v2w), self.correction(frame)]
+    }
+
+    /// One Adam step of `camera`'s mounting with a view's gradient dL/d(ω, τ) in the
+    /// world (about the vehicle of pose `v2w`), turned into the vehicle's frame. Its
+    /// own moments (a camera has many views), the frames' rates and box.
+    pub fn update_rig(&mut self, camera: usize, g: [f64; 6], v2w: &Mat4Rows, progress: f64) {
+        if camera >= self.rig.len() || g.iter().any(|v| !v.is_finite()) {
+            return;
+        }
+        // Rᵀ g for the rotation and the translation parts.
+        let rt = |v: [f64; 3]| [0, 1, 2].map(|i| (0..3).map(|k| v2w[k][i] * v[k]).sum::<f64>());
+        let (gw, gt) = (rt([g[0], g[1], g[2]]), rt([g[3], g[4], g[5]]));
+        let gv = [gw[0], gw[1], gw[2], gt[0], gt[1], gt[2]];
+        let t = self.rig_updates[camera] + 1;
+        self.rig_updates[camera] = t;
+        let (m, v) = &mut self.rig_adam[camera];
+        let bias = (1.0 - BETA1.powi(t as i32), 1.0 - BETA2.powi(t as i32));
+        adam_step(
+            &self.cfg,
+            &mut self.rig[camera],
+            m,
+            v,
+            gv,
+            bias,
+            progress,
+            0.0,
+        );
     }
 
     /// The correction of `frame` (zero for a frame it does not know).
@@ -257,34 +321,65 @@ impl PoseRefiner {
         if frame >= self.corrections.len() || g.iter().any(|v| !v.is_finite()) {
             return;
         }
-        let c = &self.cfg;
         let t = self.updates[frame] + 1;
         self.updates[frame] = t;
         self.scale_updates += 1;
-        let m = &mut self.moments[frame];
-        let v = &mut self.scale;
-        let b1 = 1.0 - BETA1.powi(t as i32);
-        let b2 = 1.0 - BETA2.powi(self.scale_updates as i32);
-        let corr = &mut self.corrections[frame];
-        let fall = 1.0 - 0.9 * progress.clamp(0.0, 1.0);
-        let lr_r = fall * c.lr_rotation_deg.to_radians();
-        let lr_t = fall * c.lr_translation_m;
-        let max_r = c.max_rotation_deg.to_radians();
-        for k in 0..6 {
-            // Roll, pitch and height (ω x, ω y, τ z) stay when planar.
-            if c.planar && matches!(k, 0 | 1 | 5) {
-                continue;
-            }
-            m[k] = BETA1 * m[k] + (1.0 - BETA1) * g[k];
-            v[k] = BETA2 * v[k] + (1.0 - BETA2) * g[k] * g[k];
-            let step = (m[k] / b1) / ((v[k] / b2).sqrt() + EPS);
-            let (x, lr, max) = if k < 3 {
-                (&mut corr.omega[k], lr_r, max_r)
-            } else {
-                (&mut corr.tau[k - 3], lr_t, c.max_translation_m)
-            };
-            *x = ((*x - lr * step) * (1.0 - c.decay)).clamp(-max, max);
+        let bias = (
+            1.0 - BETA1.powi(t as i32),
+            1.0 - BETA2.powi(self.scale_updates as i32),
+        );
+        let decay = self.cfg.decay;
+        let (m, v) = (&mut self.moments[frame], &mut self.scale);
+        adam_step(
+            &self.cfg,
+            &mut self.corrections[frame],
+            m,
+            v,
+            g,
+            bias,
+            progress,
+            decay,
+        );
+    }
+}
+
+/// One Adam step of correction `corr` with gradient `g` (moments `m`, `v`, their
+/// bias corrections `bias`), at `progress` (0 to 1) of the refining steps: the rates
+/// fall linearly to a tenth by the end; `decay` pulls toward zero; the box holds.
+/// Roll, pitch and height (ω x, ω y, τ z) stay when `planar`.
+#[allow(clippy::too_many_arguments)]
+fn adam_step(
+    c: &PoseConfig,
+    corr: &mut Correction,
+    m: &mut [f64; 6],
+    v: &mut [f64; 6],
+    g: [f64; 6],
+    bias: (f64, f64),
+    progress: f64,
+    decay: f64,
+) {
+    let fall = 1.0 - 0.9 * progress.clamp(0.0, 1.0);
+    for k in 0..6 {
+        if c.planar && matches!(k, 0 | 1 | 5) {
+            continue;
         }
+        m[k] = BETA1 * m[k] + (1.0 - BETA1) * g[k];
+        v[k] = BETA2 * v[k] + (1.0 - BETA2) * g[k] * g[k];
+        let step = (m[k] / bias.0) / ((v[k] / bias.1).sqrt() + EPS);
+        let (x, lr, max) = if k < 3 {
+            (
+                &mut corr.omega[k],
+                fall * c.lr_rotation_deg.to_radians(),
+                c.max_rotation_deg.to_radians(),
+            )
+        } else {
+            (
+                &mut corr.tau[k - 3],
+                fall * c.lr_translation_m,
+                c.max_translation_m,
+            )
+        };
+        *x = ((*x - lr * step) * (1.0 - decay)).clamp(-max, max);
     }
 }
 
@@ -351,6 +446,9 @@ impl PoseRefiner {
             "correction_rms_m": rms(frames.iter().map(|k| mag(k).0)),
             "correction_rms_deg": rms(frames.iter().map(|k| mag(k).1)),
         });
+        if !self.rig.is_empty() {
+            r["rig"] = self.rig_file(m);
+        }
         if let Some(t) = truth.filter(|t| t.len() == poses.len()) {
             let after = self.corrected(poses);
             let err = |set: &[Mat4Rows], i: usize| {
@@ -413,6 +511,30 @@ impl PoseRefiner {
                 })
             })
             .collect();
-        serde_json::json!({ "frames": frames })
+        let mut out = serde_json::json!({ "frames": frames });
+        if !self.rig.is_empty() {
+            out["cameras"] = self.rig_file(m);
+        }
+        out
+    }
+
+    /// Each camera's corrected `camera_to_vehicle` and its correction (degrees about
+    /// the vehicle's axes, metres), with the updates it had.
+    fn rig_file(&self, m: &Manifest) -> serde_json::Value {
+        m.cameras
+            .iter()
+            .zip(&self.rig)
+            .zip(&self.rig_updates)
+            .map(|((cam, c), n)| {
+                serde_json::json!({
+                    "camera": cam.name,
+                    "camera_to_vehicle": c.apply_to_mount(&cam.camera_to_vehicle),
+                    "rotation_deg": c.omega.map(f64::to_degrees),
+                    "translation_m": c.tau,
+                    "updates": n,
+                })
+            })
+            .collect::<Vec<_>>()
+            .into()
     }
 }

@@ -130,9 +130,64 @@ impl<'a> PointGrid<'a> {
                 break;
             }
             r += 1;
+            // Far from every point (a sparse set: a frame 100 km away), the rings
+            // would visit more cells than there are points: measure them all instead.
+            let side = 2 * r as u64 + 1;
+            if side * side > 4 * self.pts.len() as u64 + 64 {
+                found = (0..self.pts.len())
+                    .map(|i| ((self.pts[i][0] - x).hypot(self.pts[i][1] - y), i))
+                    .collect();
+                break;
+            }
         }
         found.sort_by(|a, b| a.0.total_cmp(&b.0));
         found.truncate(k);
         found
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::PointGrid;
+
+    /// Brute force: the k nearest in xy, nearest first.
+    fn brute(pts: &[[f64; 3]], x: f64, y: f64, k: usize) -> Vec<usize> {
+        let mut d: Vec<(f64, usize)> = pts
+            .iter()
+            .enumerate()
+            .map(|(i, p)| ((p[0] - x).hypot(p[1] - y), i))
+            .collect();
+        d.sort_by(|a, b| a.0.total_cmp(&b.0));
+        d.into_iter().take(k).map(|p| p.1).collect()
+    }
+
+    #[test]
+    fn knn_matches_brute_force_on_dense_and_on_sparse_points() {
+        // Dense: a 20 × 20 lattice of 0.3 m; sparse: a few points 100 km apart
+        // (where the rings alone would visit billions of cells).
+        let dense: Vec<[f64; 3]> = (0..400)
+            .map(|i| {
+                [
+                    (i % 20) as f64 * 0.3,
+                    (i / 20) as f64 * 0.3 + 0.01 * i as f64,
+                    0.0,
+                ]
+            })
+            .collect();
+        let sparse = vec![
+            [0.0, 0.0, 0.0],
+            [1e5, 3.0, 0.0],
+            [5e4, -2.0, 0.0],
+            [1.0, 1.0, 0.0],
+        ];
+        for (pts, cell) in [(&dense, 0.5), (&sparse, 0.5)] {
+            let g = PointGrid::new(pts, cell);
+            for (x, y) in [(0.1, 0.2), (3.0, 3.0), (7e4, 0.0), (-20.0, 5.0)] {
+                for k in [1, 3] {
+                    let got: Vec<usize> = g.knn(x, y, k).into_iter().map(|p| p.1).collect();
+                    assert_eq!(got, brute(pts, x, y, k), "({x}, {y}), k {k}");
+                }
+            }
+        }
     }
 }

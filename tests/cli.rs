@@ -83,7 +83,9 @@ fn a_bad_lidar_gate_is_refused_with_what_was_expected() {
 }
 
 #[test]
-fn a_map_too_large_for_its_settings_is_bad_input_not_a_crash() {
+fn a_drive_too_long_for_whole_layers_streams_and_over_its_budget_is_bad_input() {
+    // 100 km at 5 cm: 2 million pixels by the corridor's width, 49 GB of whole
+    // layers; the views see only its first metres, so the map's blocks are few.
     let (mut m, files) = rogs::bundle::example::tiny();
     let last = m.frames.len() - 1;
     m.frames[last].vehicle_to_world[0][3] = 1e5;
@@ -91,18 +93,41 @@ fn a_map_too_large_for_its_settings_is_bad_input_not_a_crash() {
     let zip = temp("far.zip");
     std::fs::write(&zip, rogs::bundle::write_zip(&m, &files).expect("zip")).expect("write");
     let out = temp("far-out");
-    let o = rogs(&[
-        "reconstruct",
-        zip.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--resolution",
-        "0.05",
-    ]);
+    let args = |extra: &[&'static str]| -> Vec<String> {
+        let mut a = vec![
+            "reconstruct".to_string(),
+            zip.to_str().unwrap().into(),
+            "--out".into(),
+            out.to_str().unwrap().into(),
+            "--resolution".into(),
+            "0.05".into(),
+        ];
+        a.extend(extra.iter().map(|s| s.to_string()));
+        a
+    };
+    let run = |a: &[String]| rogs(&a.iter().map(|s| s.as_str()).collect::<Vec<_>>());
+    // Streamed: map.rogsmap holds every layer, no whole-image layer is written.
+    let o = run(&args(&[]));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{err}");
+    assert!(err.contains("tile by tile into map.rogsmap"), "{err}");
+    let map = std::fs::read(out.join("map.rogsmap")).expect("map.rogsmap");
+    let summary = rogs::export::map_file::validate(map, &rogs::bundle::Limits::default())
+        .unwrap_or_else(|e| panic!("the streamed map is invalid: {e}"));
+    eprintln!("{summary:?}");
+    assert!(!out.join("rgb.png").exists());
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).expect("report"))
+            .expect("json");
+    assert_eq!(report["map_layers"]["streamed"], true, "{report}");
+    // Over a budget its blocks exceed too: bad input, with what they need.
+    let o = run(&args(&["--map-memory-mib", "64"]));
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(3), "{err}");
     assert!(
-        err.contains("MiB of layers") && err.contains("coarser resolution"),
+        err.contains("MiB of layers")
+            && err.contains("coarser resolution")
+            && err.contains("the map's blocks along the drive need"),
         "{err}"
     );
     std::fs::remove_file(zip).ok();

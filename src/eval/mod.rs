@@ -75,8 +75,10 @@ pub fn vs_reference(
     if b.manifest.lidar.is_none() {
         return Ok(None);
     }
-    let Some(poses) = b.read_true_poses()? else {
-        return Ok(None);
+    // A lazily read bundle holds one tile's files, not every sweep and image.
+    let poses = match b.read_true_poses() {
+        Err(Problem::NotLoaded { .. }) | Ok(None) => return Ok(None),
+        r => r?.unwrap_or_default(),
     };
     let mut m = b.manifest.clone();
     for (f, p) in m.frames.iter_mut().zip(&poses) {

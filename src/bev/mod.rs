@@ -98,6 +98,22 @@ pub struct BevImage {
     pub alpha: Vec<f32>,
 }
 
+impl BevImage {
+    /// Nothing rendered: black, zero logits and alpha, NaN elevation.
+    pub fn blank(width: u32, height: u32, channels: usize) -> Self {
+        let n = (width * height) as usize;
+        Self {
+            width,
+            height,
+            channels,
+            rgb: vec![0.0; 3 * n],
+            logits: vec![0.0; channels * n],
+            elevation: vec![f32::NAN; n],
+            alpha: vec![0.0; n],
+        }
+    }
+}
+
 /// The downward camera of the chunk whose top-left pixel is (c0, r0), for a model in
 /// the local frame (world − `origin`), hovering over elevation `z_mean` (local).
 fn chunk_camera(g: &BevGeometry, origin: [f64; 3], c0: u32, r0: u32, z_mean: f64) -> ViewCamera {
@@ -140,16 +156,7 @@ pub async fn render(
     per_chunk: bool,
 ) -> Result<BevImage, GpuError> {
     let ch = p.channels;
-    let npx = (g.width * g.height) as usize;
-    let mut out = BevImage {
-        width: g.width,
-        height: g.height,
-        channels: ch,
-        rgb: vec![0.0; 3 * npx],
-        logits: vec![0.0; ch * npx],
-        elevation: vec![f32::NAN; npx],
-        alpha: vec![0.0; npx],
-    };
+    let mut out = BevImage::blank(g.width, g.height, ch);
     // Mean elevation of the surfels in each chunk (chunks without any are skipped).
     let (cw, chh) = (g.width.div_ceil(CHUNK), g.height.div_ceil(CHUNK));
     let mut sums = vec![(0.0f64, 0usize); (cw * chh) as usize];

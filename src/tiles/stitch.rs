@@ -231,15 +231,7 @@ impl Stitcher {
         let n = (g.width * g.height) as usize;
         let ch = self.channels;
         let mut out = Layers {
-            bev: BevImage {
-                width: g.width,
-                height: g.height,
-                channels: ch,
-                rgb: vec![0.0; 3 * n],
-                logits: vec![0.0; ch * n],
-                elevation: vec![f32::NAN; n],
-                alpha: vec![0.0; n],
-            },
+            bev: BevImage::blank(g.width, g.height, ch),
             confidence: vec![f32::NAN; n],
             density: vec![f32::NAN; n],
         };

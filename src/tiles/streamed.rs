@@ -120,15 +120,7 @@ impl TiledRun {
         let outcome = Outcome {
             params: Params::default(),
             geometry: g,
-            bev: BevImage {
-                width: 0,
-                height: 0,
-                channels: self.model.channels,
-                rgb: Vec::new(),
-                logits: Vec::new(),
-                elevation: Vec::new(),
-                alpha: Vec::new(),
-            },
+            bev: BevImage::blank(0, 0, self.model.channels),
             raster: BevRaster::empty(g.origin, g.resolution, 0, 0),
             confidence: Vec::new(),
             density: Vec::new(),

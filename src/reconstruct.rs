@@ -810,10 +810,10 @@ impl Outcome {
             params: Params::default(),
             geometry: g,
             bev: layers.bev,
-            raster,
             confidence: layers.confidence,
             density: layers.density,
-            truth: truth.map(|t| t.crop_to(&g)),
+            truth: truth.map(|t| t.crop_to(&raster)),
+            raster,
             metrics: None,
             holdout: None,
         }

@@ -31,12 +31,12 @@ impl BevRaster {
         }
     }
 
-    /// This raster over geometry `g` (each pixel from the pixel at its centre;
-    /// invalid outside this raster): a block of a map cut out of the truth.
-    pub fn crop_to(&self, g: &crate::bev::BevGeometry) -> Self {
-        let mut out = Self::empty(g.origin, g.resolution, g.width, g.height);
-        for r in 0..g.height {
-            for c in 0..g.width {
+    /// This raster over the grid of `like` (each pixel from the pixel at its
+    /// centre; invalid outside this raster): a block of a map cut out of the truth.
+    pub fn crop_to(&self, like: &BevRaster) -> Self {
+        let mut out = Self::empty(like.origin, like.resolution, like.width, like.height);
+        for r in 0..like.height {
+            for c in 0..like.width {
                 let (x, y) = out.centre(c, r);
                 let Some((sc, sr)) = self.pixel_of(x, y) else {
                     continue;
@@ -45,7 +45,7 @@ impl BevRaster {
                 out.class_ids
                     .put_pixel(c, r, *self.class_ids.get_pixel(sc, sr));
                 out.valid.put_pixel(c, r, *self.valid.get_pixel(sc, sr));
-                out.elevation[(r * g.width + c) as usize] = self.elevation_at(sc, sr);
+                out.elevation[(r * like.width + c) as usize] = self.elevation_at(sc, sr);
             }
         }
         out

@@ -1,6 +1,8 @@
-//! regularise: the per-surfel terms of the loss and their z gradient, written for
-//! every surfel to `zgrad` (`adam` adds the photometric z gradient of the surfels in
-//! the view, which `project_backward` left per candidate slot):
+//! regularise: the per-surfel terms of the loss and their z gradient, written to
+//! `zgrad` for every surfel (dense Adam) or for the view's candidates alone
+//! (selective Adam, `rp.selective`: the surfels the step will update), and `adam` adds
+//! the photometric z gradient of the surfels in the view, which `project_backward`
+//! left per candidate slot:
 //!   L_smooth = w_s Σ_{edges ij} (z_i − z_j)²        (grid neighbours, CSR)
 //!   L_traj   = w_t Σ_i q_i ρ(z_i − ẑ_i)             (ρ: Huber with width δ)
 //!   L_z      = w_z Σ_{i with LiDAR} (z_i − z_lidar,i)²
@@ -14,7 +16,11 @@
 //! reduction took 60 % of the pass (131 ms per step at 5 cm, 54 without it). A z gradient that is not `usable`
 //! (guard.wgsl) raises `status[0]`, and `adam` then applies nothing.
 //!
-//! It also checks the view's candidate list (src/render/candidates.rs), which the host
+//! Selective: invocation slot j takes candidate `cand[j]` and writes (its z
+//! gradient, the surfel) to `zgrad[2j]`, `zgrad[2j + 1]`, so `adam` finds both by
+//! slot; the sums cover the candidates only (each surfel's terms are its own).
+//!
+//! Dense: it also checks the view's candidate list (src/render/candidates.rs), which the host
 //! made from positions it knew: a surfel that is not a candidate but now lies in the
 //! culling box (its z moved beyond the host's margin) raises `status[1]`, and the host
 //! then reads the positions back before the next view. The pass already reads every
@@ -25,8 +31,9 @@
 struct RegParams {
     count: u32,
     row: u32,
-    pad0: u32,
-    pad1: u32,
+    // 1: over the candidates (`cand_count` slots); 0: over every surfel.
+    selective: u32,
+    cand_count: u32,
     w_smooth: f32,
     w_traj: f32,
     huber: f32,
@@ -39,20 +46,23 @@ struct RegParams {
 @group(0) @binding(3) var<storage, read> adj: array<u32>;
 // Per surfel: ẑ, q, LiDAR z, LiDAR weight (0 or 1).
 @group(0) @binding(4) var<storage, read> priors: array<vec4<f32>>;
-// z gradient per surfel (the buffer's tail holds `adam`'s membership words).
-@group(0) @binding(5) var<storage, read_write> zgrad: array<f32>;
+// Dense: z gradient per surfel (f32 bits), then `adam`'s membership words.
+// Selective: (z gradient, surfel) per candidate slot.
+@group(0) @binding(5) var<storage, read_write> zgrad: array<u32>;
 @group(0) @binding(6) var<storage, read_write> partial: array<f32>;
 // [0]: a gradient was not usable; [1]: a surfel in the box was not a candidate.
 @group(0) @binding(7) var<storage, read_write> status: array<u32>;
 @group(0) @binding(8) var<uniform> view: View;
+// The view's candidates, increasing: slot → surfel.
+@group(0) @binding(9) var<storage, read> cand: array<u32>;
 
 var<workgroup> red: array<vec3<f32>, 256>;
 
 // `PER`, the surfels per invocation, is prepended by the host (src/optim/train.rs),
 // which dispatches ceil(count / (256 PER)) workgroups.
 
-/// Surfel i's three loss terms; writes its z gradient and checks its membership.
-fn surfel(i: u32) -> vec3<f32> {
+/// Surfel i's three loss terms and its z gradient.
+fn terms(i: u32) -> vec4<f32> {
     var l = vec3<f32>(0.0);
     let z = pos[3u * i + 2u];
     var g = 0.0;
@@ -71,20 +81,35 @@ fn surfel(i: u32) -> vec3<f32> {
     let e = z - pr.z;
     l.z = rp.w_lidar * pr.w * e * e;
     g += 2.0 * rp.w_lidar * pr.w * e;
-    zgrad[i] = g;
     if !usable(g) {
         status[0] = 1u;
     }
+    return vec4<f32>(l, g);
+}
+
+/// Candidate slot j (selective): its surfel's terms, (gradient, surfel) at 2j.
+fn slot(j: u32) -> vec3<f32> {
+    let i = cand[j];
+    let t = terms(i);
+    zgrad[2u * j] = bitcast<u32>(t.w);
+    zgrad[2u * j + 1u] = i;
+    return t.xyz;
+}
+
+/// Surfel i (dense): its terms; writes its z gradient and checks its membership.
+fn surfel(i: u32) -> vec3<f32> {
+    let t = terms(i);
+    zgrad[i] = bitcast<u32>(t.w);
     // Membership words follow the z gradients (adam.wgsl).
-    let mask = bitcast<u32>(zgrad[rp.count + 2u * (i / 32u)]);
+    let mask = zgrad[rp.count + 2u * (i / 32u)];
     if (mask & (1u << (i % 32u))) == 0u {
-        let p = vec4<f32>(pos[3u * i], pos[3u * i + 1u], z, 1.0);
+        let p = vec4<f32>(pos[3u * i], pos[3u * i + 1u], pos[3u * i + 2u], 1.0);
         let depth = dot(view.w2c2, p);
         if depth >= view.near && depth <= view.far && abs(dot(view.w2c0, p)) <= view.half_width {
             status[1] = 1u;
         }
     }
-    return l;
+    return t.xyz;
 }
 
 @compute @workgroup_size(256)
@@ -93,7 +118,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     var l = vec3<f32>(0.0);
     for (var j = 0u; j < PER; j++) {
         let i = (w * PER + j) * 256u + li;
-        if i < rp.count {
+        if rp.selective != 0u {
+            if i < rp.cand_count {
+                l += slot(i);
+            }
+        } else if i < rp.count {
             l += surfel(i);
         }
     }

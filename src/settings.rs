@@ -92,6 +92,10 @@ pub struct Settings {
     /// Host memory the map's whole layers may take, MiB (default: 8 GiB).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub map_memory_mib: Option<u64>,
+    /// "dense" (default: a step updates every surfel) or "selective" (only the
+    /// surfels its view may see).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub adam: Option<String>,
 }
 
 /// What a front end uses where a setting is absent.
@@ -180,6 +184,10 @@ impl Settings {
         }
         if let Some(v) = finite("lr_z_end", self.lr_z_end, "1.6e-5")? {
             c.train.lr.z_end = v;
+        }
+        if let Some(a) = self.adam.as_deref() {
+            c.train.adam = crate::optim::AdamScope::parse(a)
+                .ok_or_else(|| format!("adam {a:?}: expected \"dense\" or \"selective\""))?;
         }
         if self.align == Some(false) {
             c.align = None;

@@ -7,17 +7,24 @@ use rogs::gpu::GpuContext;
 use rogs::loss::regularise::{regularise, RegWeights};
 use rogs::optim::check::{compare_pose_grad, compare_step};
 
-/// With every moment in one binding, and in windows of 3 blocks of 256 surfels (3
-/// `adam` passes, the last one partial, as a model larger than one binding takes); step 2 sized from step 1's pair count, and
-/// with too small a margin, so that its pairs overflow and it runs again.
+/// Selective and dense Adam, with every moment in one binding, and in windows of 3
+/// blocks of 256 surfels (3 `adam` passes, the last one partial, as a model larger
+/// than one binding takes); step 2 sized from step 1's pair count, and with too small
+/// a margin, so that its pairs overflow and it runs again.
 #[test]
 fn gpu_step_matches_the_oracles() {
-    for (window, margin, overflows) in [(None, None, 0), (Some(3), None, 0), (None, Some(0.4), 1)] {
-        let ctx =
-            GpuContext::new_blocking().unwrap_or_else(|e| panic!("GPU tests need an adapter: {e}"));
-        let d = pollster::block_on(compare_step(ctx, window, margin)).expect("gpu step");
-        assert_eq!(d.pair_overflows, [0, overflows], "{d:#?}");
-        check_step(d);
+    use rogs::optim::AdamScope;
+    for mode in [AdamScope::Selective, AdamScope::Dense] {
+        for (window, margin, overflows) in
+            [(None, None, 0), (Some(3), None, 0), (None, Some(0.4), 1)]
+        {
+            let ctx = GpuContext::new_blocking()
+                .unwrap_or_else(|e| panic!("GPU tests need an adapter: {e}"));
+            let d = pollster::block_on(compare_step(ctx, mode, window, margin)).expect("gpu step");
+            assert_eq!(d.pair_overflows, [0, overflows], "{d:#?}");
+            assert_eq!(d.decayed > 0, mode != AdamScope::Dense, "{d:#?}");
+            check_step(d);
+        }
     }
 }
 
@@ -58,12 +65,8 @@ fn check_step(d: rogs::optim::check::StepDifferences) {
         );
     }
     assert!(d.moved > 1e-3, "the step should change the parameters");
-    assert_eq!(d.applied, [true, true], "both updates are finite");
-    assert!(
-        d.params[0] < 1e-5 && d.params[1] < 1e-5,
-        "Adam: {:?}",
-        d.params
-    );
+    assert_eq!(d.applied, [true; 4], "every update is finite");
+    assert!(d.params.iter().all(|&p| p < 1e-5), "Adam: {:?}", d.params);
     assert!(d.exposure < 1e-6, "exposure Adam differs by {}", d.exposure);
 }
 
@@ -126,16 +129,19 @@ fn regulariser_gradient_matches_finite_differences() {
 /// knows; a surfel that leaves it is noticed on the GPU and the positions are re-read.
 #[test]
 fn a_surfel_the_candidate_list_missed_is_found_and_listed_next_time() {
-    let ctx =
-        GpuContext::new_blocking().unwrap_or_else(|e| panic!("GPU tests need an adapter: {e}"));
-    let d = pollster::block_on(rogs::optim::check::missed_candidate(ctx)).expect("steps");
-    eprintln!("{d:?}");
-    assert_eq!(d.refreshes, [1, 1], "refreshed once, then listed");
-    assert_eq!(d.host_z[0], 50.0);
-    assert_eq!(
-        d.host_z[1], d.gpu_z,
-        "the host now knows where the surfel is"
-    );
+    use rogs::optim::AdamScope;
+    for mode in [AdamScope::Selective, AdamScope::Dense] {
+        let ctx =
+            GpuContext::new_blocking().unwrap_or_else(|e| panic!("GPU tests need an adapter: {e}"));
+        let d = pollster::block_on(rogs::optim::check::missed_candidate(ctx, mode)).expect("steps");
+        eprintln!("{mode:?}: {d:?}");
+        assert_eq!(d.refreshes, [1, 1], "refreshed once, then listed");
+        assert!(mode == AdamScope::Selective || d.host_z[0] == 50.0);
+        assert_eq!(
+            d.host_z[1], d.gpu_z,
+            "the host now knows where the surfel is"
+        );
+    }
 }
 
 /// What a model must fit: 16 bytes per surfel (rotations, priors) in one storage

@@ -98,34 +98,44 @@ async fn rasteriser_matches_the_cpu_oracle_in_the_browser() {
 
 #[wasm_bindgen_test]
 async fn optimisation_step_matches_the_oracles_in_the_browser() {
-    let ctx = match GpuContext::new().await {
-        Ok(c) => c,
-        Err(e) => panic!("WebGPU adapter required: {e}"),
-    };
-    // In 3 windows of moments (blocks of 256 surfels, the last partial): the model is small, so one would do, but a large one
-    // takes this path; the page's full runs take the single-window one. Step 2's pair
-    // buffers are too small, so it overflows them once and runs again.
-    let d = rogs::optim::check::compare_step(ctx, Some(3), Some(0.4))
-        .await
-        .expect("gpu step");
-    assert_eq!(d.pair_overflows, [0, 1]);
-    for (name, gpu, cpu) in &d.losses {
+    // In 3 windows of moments (blocks of 256 surfels, the last partial): the model is
+    // small, so one would do, but a large one takes this path; the page's full runs
+    // take the single-window one. Step 2's pair buffers are too small, so it overflows
+    // them once and runs again. Dense Adam (the default) and selective.
+    for mode in [
+        rogs::optim::AdamScope::Dense,
+        rogs::optim::AdamScope::Selective,
+    ] {
+        let ctx = match GpuContext::new().await {
+            Ok(c) => c,
+            Err(e) => panic!("WebGPU adapter required: {e}"),
+        };
+        let d = rogs::optim::check::compare_step(ctx, mode, Some(3), Some(0.4))
+            .await
+            .expect("gpu step");
+        assert_eq!(d.pair_overflows, [0, 1]);
+        for (name, gpu, cpu) in &d.losses {
+            assert!(
+                *cpu > 0.0 && (gpu - cpu).abs() <= 1e-4 * cpu.abs(),
+                "{mode:?} {name}: {gpu} vs {cpu}"
+            );
+        }
+        for (name, rel) in &d.grads {
+            assert!(
+                *rel < 2e-3,
+                "{mode:?} {name}: GPU vs CPU gradient differs by {rel}"
+            );
+        }
+        assert!(d.moved > 1e-3);
+        assert_eq!(d.applied, [true; 4], "every update is finite");
+        assert_eq!(d.decayed > 0, mode == rogs::optim::AdamScope::Selective);
         assert!(
-            *cpu > 0.0 && (gpu - cpu).abs() <= 1e-4 * cpu.abs(),
-            "{name}: {gpu} vs {cpu}"
+            d.params.iter().all(|&p| p < 1e-5),
+            "{mode:?} Adam: {:?}",
+            d.params
         );
+        assert!(d.exposure < 1e-6);
     }
-    for (name, rel) in &d.grads {
-        assert!(*rel < 2e-3, "{name}: GPU vs CPU gradient differs by {rel}");
-    }
-    assert!(d.moved > 1e-3);
-    assert_eq!(d.applied, [true, true], "both updates are finite");
-    assert!(
-        d.params[0] < 1e-5 && d.params[1] < 1e-5,
-        "Adam: {:?}",
-        d.params
-    );
-    assert!(d.exposure < 1e-6);
 }
 
 #[wasm_bindgen_test]
@@ -153,11 +163,10 @@ async fn a_surfel_the_candidate_list_missed_is_found_in_the_browser() {
         Ok(c) => c,
         Err(e) => panic!("WebGPU adapter required: {e}"),
     };
-    let d = rogs::optim::check::missed_candidate(ctx)
+    let d = rogs::optim::check::missed_candidate(ctx, rogs::optim::AdamScope::Selective)
         .await
         .expect("steps");
     assert_eq!(d.refreshes, [1, 1], "refreshed once, then listed: {d:?}");
-    assert_eq!(d.host_z[0], 50.0);
     assert_eq!(
         d.host_z[1], d.gpu_z,
         "the host now knows where the surfel is"

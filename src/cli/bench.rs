@@ -64,6 +64,9 @@ pub enum Bench {
         /// whose moments exceed one storage binding needs; to measure what they cost).
         #[arg(long)]
         moment_window: Option<usize>,
+        /// Which surfels a step updates (to compare the two).
+        #[arg(long, value_enum, default_value = "dense")]
+        adam: super::reconstruct::AdamMode,
     },
     /// Grid, initialisation and refinement of a bundle: time per stage, surfel
     /// counts and bytes per surfel (median of the runs).
@@ -107,6 +110,7 @@ pub fn run(b: Bench) -> Result<ExitCode, String> {
             half_width,
             no_subgroup_reduction,
             moment_window,
+            adam,
         } => super::bench_step::run(
             &bundle,
             steps,
@@ -114,6 +118,7 @@ pub fn run(b: Bench) -> Result<ExitCode, String> {
             half_width,
             no_subgroup_reduction,
             moment_window,
+            adam,
         ),
         Bench::Init {
             bundle,

@@ -20,6 +20,7 @@ pub fn run(
     half_width: f64,
     no_subgroup_reduction: bool,
     moment_window: Option<usize>,
+    adam: super::reconstruct::AdamMode,
 ) -> Result<ExitCode, String> {
     let mut b =
         Bundle::open(bundle, Limits::default(), &mut |_, _| {}).map_err(|e| e.to_string())?;
@@ -27,6 +28,7 @@ pub fn run(
     cfg.prepare.grid.resolution = resolution;
     cfg.prepare.grid.half_width = half_width;
     cfg.train.moment_window = moment_window;
+    cfg.train.adam = adam.scope();
     // One warm-up step (first use of every pipeline and buffer size), then the timed ones.
     cfg.train.max_steps = Some(steps.max(1) + 1);
     let mut ctx = GpuContext::new_blocking().map_err(|e| e.to_string())?;
@@ -85,6 +87,7 @@ pub fn run(
         "bundle": bundle.display().to_string(),
         "adapter": s.trainer.ctx.report.name,
         "subgroup_reduction": subgroups,
+        "adam": adam.name(),
         "seconds_per_step": wall.iter().sum::<f64>() / n,
         "seconds_per_step_median": median,
         "surfels": s.prepare_report.surfels,

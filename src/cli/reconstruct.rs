@@ -20,6 +20,31 @@ enum Init {
     Consensus,
 }
 
+/// Which surfels an optimisation step updates (`Settings::adam`).
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum AdamMode {
+    /// Every parameter of every surfel every step (the paper's Adam; the default).
+    Dense,
+    /// Only the surfels the step's view may see: up to 2× faster steps on large
+    /// models, but a surfel's height then moves only in its views, so maps whose
+    /// height must travel far from the trajectory's plane come out worse.
+    Selective,
+}
+
+impl AdamMode {
+    pub fn scope(self) -> crate::optim::AdamScope {
+        use crate::optim::AdamScope;
+        match self {
+            Self::Selective => AdamScope::Selective,
+            Self::Dense => AdamScope::Dense,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        self.scope().name()
+    }
+}
+
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]
 enum Baseline {
     /// Best-view colours draped on the initial surface, no optimisation.
@@ -86,6 +111,12 @@ pub struct SettingsArgs {
     /// Drop the trajectory-prior loss L_traj.
     #[arg(long)]
     no_traj_loss: bool,
+    /// Which surfels a step updates: every parameter of every surfel (dense, the
+    /// paper's Adam), or only those the step's view may see (selective: a step's
+    /// cost follows the view, not the model; docs/PERFORMANCE.md says what it costs
+    /// the map).
+    #[arg(long, value_enum, default_value = "dense")]
+    adam: AdamMode,
     /// Leave every K-th frame out of training and report road PSNR on those views,
     /// for the result and for the IPM baseline.
     #[arg(long)]
@@ -209,6 +240,7 @@ impl SettingsArgs {
                 .or(a.pose_all.then_some(false)),
             map_memory_mib: a.map_memory_mib,
             pose_rig: Some(a.pose_rig),
+            adam: Some(a.adam.name().into()),
         }
     }
 }

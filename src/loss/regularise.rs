@@ -122,9 +122,24 @@ impl RegData {
 
 /// Loss sums (smooth, traj, lidar) and dL/dz per surfel, for elevations `z` (local).
 pub fn regularise(d: &RegData, w: &RegWeights, z: &[f32]) -> ([f64; 3], Vec<f32>) {
+    let all: Vec<u32> = (0..z.len() as u32).collect();
+    regularise_over(d, w, z, &all)
+}
+
+/// The terms of the surfels `over` alone (a view's candidates, as selective Adam
+/// steps them): their loss sums and dL/dz per entry of `over`. Each surfel's terms
+/// are its own (an edge counts half at either end), so the sums over a partition of
+/// the surfels add up to `regularise`'s.
+pub fn regularise_over(
+    d: &RegData,
+    w: &RegWeights,
+    z: &[f32],
+    over: &[u32],
+) -> ([f64; 3], Vec<f32>) {
     let mut loss = [0.0f64; 3];
-    let mut grad = vec![0.0f32; z.len()];
-    for i in 0..z.len() {
+    let mut grad = Vec::with_capacity(over.len());
+    for &i in over {
+        let i = i as usize;
         let mut g = 0.0f32;
         for &j in &d.adj[d.adj_start[i] as usize..d.adj_start[i + 1] as usize] {
             let dz = z[i] - z[j as usize];
@@ -143,7 +158,7 @@ pub fn regularise(d: &RegData, w: &RegWeights, z: &[f32]) -> ([f64; 3], Vec<f32>
         let e = z[i] - zl;
         loss[2] += (w.lidar * has * e * e) as f64;
         g += 2.0 * w.lidar * has * e;
-        grad[i] = g;
+        grad.push(g);
     }
     (loss, grad)
 }

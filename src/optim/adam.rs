@@ -1,6 +1,8 @@
-//! Oracle of `shaders/adam.wgsl` and the learning rates: one Adam step of every
-//! learnable surfel parameter (x, y fixed, so without moments) and of one camera's
-//! exposure, applied only when every gradient is usable (shaders/guard.wgsl).
+//! Oracle of `shaders/adam.wgsl` and the learning rates: one Adam step of the
+//! learnable surfel parameters (x, y fixed, so without moments) of every surfel
+//! (dense) or of the view's candidates alone (selective, with lazy moment decay), and
+//! of one camera's exposure, applied only when every gradient is usable
+//! (shaders/guard.wgsl).
 
 use crate::render::Params;
 use serde::Serialize;
@@ -108,6 +110,9 @@ pub struct StepConstants {
     /// 1 − β1ᵗ and 1 − β2ᵗ for step t (from 1).
     pub bias1: f32,
     pub bias2: f32,
+    /// t, the step (from 1): a surfel last stepped at step s < t − 1 missed
+    /// t − 1 − s steps, and its moments decay by β1 and β2 to that power first.
+    pub t: u32,
 }
 
 impl StepConstants {
@@ -125,6 +130,7 @@ impl StepConstants {
             eps: lr.eps,
             bias1: 1.0 - lr.beta1.powi(t as i32),
             bias2: 1.0 - lr.beta2.powi(t as i32),
+            t,
         }
     }
 }
@@ -135,9 +141,43 @@ pub fn learnable(channels: usize) -> usize {
     11 + channels
 }
 
-fn adam(c: &StepConstants, m: &mut [f32], value: f32, g: f32, lr: f32) -> f32 {
-    let mm = c.beta1 * m[0] + (1.0 - c.beta1) * g;
-    let v = c.beta2 * m[1] + (1.0 - c.beta2) * g * g;
+/// What a surfel that missed k steps (selective Adam) catches up before its step: k
+/// steps of zero gradient decay its moments by β1ᵏ and β2ᵏ and would have moved it
+/// by Σⱼ₌₁..ₖ rʲ (r = β1/√β2) times its last normalised moment, with this step's
+/// learning rate and bias corrections (shaders/adam.wgsl, `missed`).
+#[derive(Clone, Copy, Debug)]
+pub struct Missed {
+    pub decay1: f32,
+    pub decay2: f32,
+    pub drift: f32,
+}
+
+impl Missed {
+    pub const NONE: Self = Self {
+        decay1: 1.0,
+        decay2: 1.0,
+        drift: 0.0,
+    };
+
+    pub fn of(c: &StepConstants, k: u32) -> Self {
+        if k == 0 {
+            return Self::NONE;
+        }
+        let k = k as f32;
+        let r = c.beta1 / c.beta2.sqrt();
+        Self {
+            decay1: c.beta1.powf(k),
+            decay2: c.beta2.powf(k),
+            drift: r * (1.0 - r.powf(k)) / (1.0 - r),
+        }
+    }
+}
+
+fn adam(c: &StepConstants, m: &mut [f32], value: f32, g: f32, lr: f32, k: Missed) -> f32 {
+    let (m0, v0) = (m[0], m[1]);
+    let value = value - lr * k.drift * (m0 / c.bias1) / ((v0 / c.bias2).sqrt() + c.eps);
+    let mm = c.beta1 * (k.decay1 * m0) + (1.0 - c.beta1) * g;
+    let v = c.beta2 * (k.decay2 * v0) + (1.0 - c.beta2) * g * g;
     m[0] = mm;
     m[1] = v;
     value - lr * (mm / c.bias1) / ((v / c.bias2).sqrt() + c.eps)
@@ -155,15 +195,32 @@ pub fn usable(x: f32) -> bool {
     x.is_finite() && x.abs() < 1e18
 }
 
-/// One step of every surfel parameter in `p` from gradients `g` (same layout) and of
-/// the view's exposure; `moments` holds m, v interleaved per learnable slot
-/// (`2 learnable(channels)` per surfel; the kernel stores them in blocks of 256
-/// surfels, slot-major within a block, which changes no value). All or nothing: when any gradient is not
-/// `usable`, nothing changes and the result is false.
+/// Which surfels a step updates.
+#[derive(Clone, Copy, Debug)]
+pub enum Touched<'a> {
+    /// Every surfel, every step (dense Adam): a surfel out of view moves by its
+    /// regularisers' gradient and its momentum.
+    All,
+    /// These surfels (increasing; the view's candidates) and no other (selective
+    /// Adam): the rest keep their values and moments until a view lists them again.
+    Only(&'a [u32]),
+}
+
+/// One step of the surfel parameters in `p` that `touched` names, from gradients `g`
+/// (same layout), and of the view's exposure. `moments` holds m, v interleaved per
+/// learnable slot (`2 learnable(channels)` per surfel; the kernel stores them in
+/// blocks of 256 surfels, slot-major within a block, which changes no value); `last`
+/// the step (from 1, 0: never) at which each surfel was last stepped. A surfel that
+/// missed k steps first catches up what k steps of zero gradient would have done
+/// (`Missed`); under `All` k is 0. All
+/// or nothing: when any gradient is not `usable`, nothing changes and the result is
+/// false.
 pub fn step(
     p: &mut Params<f32>,
     g: &Params<f32>,
     moments: &mut [f32],
+    last: &mut [u32],
+    touched: Touched,
     e: Exposure,
     c: &StepConstants,
 ) -> bool {
@@ -179,39 +236,65 @@ pub fn step(
     }
     let ch = p.channels;
     let stride = 2 * learnable(ch);
-    for i in 0..p.len() {
+    let all: Vec<u32>;
+    let surfels = match touched {
+        Touched::All => {
+            all = (0..p.len() as u32).collect();
+            &all[..]
+        }
+        Touched::Only(s) => s,
+    };
+    for &i in surfels {
+        let i = i as usize;
         let m = &mut moments[stride * i..stride * (i + 1)];
-        p.pos[i][2] = adam(c, &mut m[0..2], p.pos[i][2], g.pos[i][2], c.lr_z);
-        for k in 0..4 {
-            let s = 2 * (1 + k);
-            let r = &mut p.rotation[i][k];
-            *r = adam(c, &mut m[s..s + 2], *r, g.rotation[i][k], c.lr_rotation);
+        let k = Missed::of(c, c.t.saturating_sub(1).saturating_sub(last[i]));
+        last[i] = c.t;
+        p.pos[i][2] = adam(c, &mut m[0..2], p.pos[i][2], g.pos[i][2], c.lr_z, k);
+        for q in 0..4 {
+            let s = 2 * (1 + q);
+            let r = &mut p.rotation[i][q];
+            *r = adam(c, &mut m[s..s + 2], *r, g.rotation[i][q], c.lr_rotation, k);
         }
-        for k in 0..2 {
-            let s = 2 * (5 + k);
-            let l = &mut p.log_scale[i][k];
-            *l = adam(c, &mut m[s..s + 2], *l, g.log_scale[i][k], c.lr_scale);
+        for q in 0..2 {
+            let s = 2 * (5 + q);
+            let l = &mut p.log_scale[i][q];
+            *l = adam(c, &mut m[s..s + 2], *l, g.log_scale[i][q], c.lr_scale, k);
         }
-        p.opacity[i] = adam(c, &mut m[14..16], p.opacity[i], g.opacity[i], c.lr_opacity);
-        for k in 0..3 {
-            let s = 2 * (8 + k);
-            let v = adam(c, &mut m[s..s + 2], p.rgb[i][k], g.rgb[i][k], c.lr_rgb);
-            p.rgb[i][k] = v.clamp(0.0, 1.0);
+        p.opacity[i] = adam(
+            c,
+            &mut m[14..16],
+            p.opacity[i],
+            g.opacity[i],
+            c.lr_opacity,
+            k,
+        );
+        for q in 0..3 {
+            let s = 2 * (8 + q);
+            let v = adam(c, &mut m[s..s + 2], p.rgb[i][q], g.rgb[i][q], c.lr_rgb, k);
+            p.rgb[i][q] = v.clamp(0.0, 1.0);
         }
         for j in 0..ch {
             let s = 2 * (11 + j);
             let l = &mut p.logits[ch * i + j];
-            *l = adam(c, &mut m[s..s + 2], *l, g.logits[ch * i + j], c.lr_logits);
+            *l = adam(
+                c,
+                &mut m[s..s + 2],
+                *l,
+                g.logits[ch * i + j],
+                c.lr_logits,
+                k,
+            );
         }
     }
-    for k in 0..2 {
-        let v = e.value[k];
-        e.value[k] = adam(
+    for q in 0..2 {
+        let v = e.value[q];
+        e.value[q] = adam(
             c,
-            &mut e.moments[2 * k..2 * k + 2],
+            &mut e.moments[2 * q..2 * q + 2],
             v,
-            e.grad[k],
+            e.grad[q],
             c.lr_exposure,
+            Missed::NONE,
         );
     }
     true

@@ -3,14 +3,16 @@
 //! `loss::photometric` + the rasteriser oracle + `loss::regularise`, then the Adam
 //! kernel against `optim::adam` applied to the GPU's own gradients (Adam's
 //! normalisation turns a 1e-7 gradient difference into a full step, so the update is
-//! checked from identical gradients), over two steps so that the moments matter.
+//! checked from identical gradients), over four steps so that the moments matter: two
+//! of one view, one of a view that sees a part of it, and the first view again, so
+//! that selective Adam's surfels that missed a step decay their moments.
 
-use super::adam::{learnable, step, Exposure, StepConstants};
+use super::adam::{learnable, step, Exposure, StepConstants, Touched};
 use super::train::Trainer;
 use super::TrainConfig;
 use crate::gpu::{GpuContext, GpuError};
 use crate::loss::photometric::photometric;
-use crate::loss::regularise::{regularise, RegData};
+use crate::loss::regularise::{regularise_over, RegData};
 use crate::render::check::test_scene;
 use crate::render::rasterize::render;
 use crate::render::{project_backward, rasterize_backward, Params};
@@ -22,14 +24,17 @@ pub struct StepDifferences {
     pub losses: Vec<(&'static str, f64, f64)>,
     /// Gradients of step 1, relative to each group's largest magnitude.
     pub grads: Vec<(&'static str, f32)>,
-    /// Parameters after steps 1 and 2 against the CPU Adam, max abs difference.
-    pub params: [f32; 2],
-    /// Exposure after step 2 against the CPU Adam.
+    /// Parameters after each step against the CPU Adam, max abs difference.
+    pub params: [f32; 4],
+    /// Exposure after the last step against the CPU Adam.
     pub exposure: f32,
     /// Largest parameter change of step 1 (so that a no-op step cannot pass).
     pub moved: f32,
-    /// Whether the CPU Adam applied steps 1 and 2 (it refuses non-finite updates).
-    pub applied: [bool; 2],
+    /// Whether the CPU Adam applied each step (it refuses non-finite updates).
+    pub applied: [bool; 4],
+    /// Surfels that step 4 updated after missing step 3 (their moments decayed);
+    /// 0 under dense Adam.
+    pub decayed: usize,
     /// `Trainer::pair_overflows` after steps 1 and 2.
     pub pair_overflows: [usize; 2],
 }
@@ -85,12 +90,14 @@ fn reg_data(n: usize, z: &[f32], rng: &mut Rng) -> RegData {
     }
 }
 
-/// Two GPU steps against the oracles; `moment_window` limits the blocks of 256
-/// surfels whose moments one `adam` pass binds (`None`: as many as fit, one pass here);
-/// `pair_margin` (`None`: the default) sizes step 2's pair buffers from step 1's
-/// count (below 1 step 2 overflows them and runs again).
+/// Four GPU steps against the oracles, with Adam's scope `mode`;
+/// `moment_window` limits the blocks of 256 surfels whose moments one `adam` pass
+/// binds (`None`: as many as fit, one pass here); `pair_margin` (`None`: the default)
+/// sizes step 2's pair buffers from step 1's count (below 1 step 2 overflows them and
+/// runs again).
 pub async fn compare_step(
     ctx: GpuContext,
+    mode: super::AdamScope,
     moment_window: Option<usize>,
     pair_margin: Option<f64>,
 ) -> Result<StepDifferences, GpuError> {
@@ -104,8 +111,10 @@ pub async fn compare_step(
     let reg = reg_data(n, &z, &mut rng);
     let mut cfg = TrainConfig {
         moment_window,
+        adam: mode,
         ..TrainConfig::default()
     };
+    let selective = mode == super::AdamScope::Selective;
     cfg.pair_margin = pair_margin.unwrap_or(cfg.pair_margin);
     cfg.loss.min_alpha = 0.2;
     let npx = (cam.width * cam.height) as usize;
@@ -134,14 +143,15 @@ pub async fn compare_step(
     let (vg, exp_g) = rasterize_backward::backward(&p0, &cam, &f, &og);
     let mut g = project_backward::backward(&p0, &cam, &vg);
     let w = reg.weights(&cfg.loss, true);
-    let (rl, rz) = regularise(&reg, &w, &z);
-    for (gp, dz) in g.pos.iter_mut().zip(&rz) {
-        gp[2] += dz;
+    let cand0 = crate::render::candidates::candidates(&p0.pos, &cam, &cull);
+    let all: Vec<u32> = (0..n as u32).collect();
+    let over = |c: &[u32]| if selective { c.to_vec() } else { all.clone() };
+    let (rl, rz) = regularise_over(&reg, &w, &z, &over(&cand0));
+    for (&i, dz) in over(&cand0).iter().zip(&rz) {
+        g.pos[i as usize][2] += dz;
     }
-    let gl = t
-        .step(&cam, 0, &target, mask)
-        .await
-        .map_err(|e| GpuError::Validation(e.to_string()))?;
+    let to_gpu = |e: super::train::TrainError| GpuError::Validation(e.to_string());
+    let gl = t.step(&cam, 0, &target, mask).await.map_err(to_gpu)?;
     out.losses = vec![
         ("rgb", gl.rgb, l.rgb),
         ("ce", gl.ce, l.ce),
@@ -170,40 +180,54 @@ pub async fn compare_step(
         ),
         ("exposure", rel(&e1, &exp_g)),
     ];
-    // Adam from the GPU's gradients, two steps.
+    // Adam from the GPU's gradients, step by step: views A, A, B (8 m further on, so
+    // that it sees only a part of A's candidates), A.
+    let mut near = cam;
+    near.world_to_cam[2][3] -= 8.0;
     let lr = &cfg.lr;
     let mut moments = vec![0.0f32; 2 * learnable(ch) * n];
+    let mut last = vec![0u32; n];
     let mut em = [0.0f32; 4];
     let mut exposure = [0.0f32; 2];
     let mut cpu = p0.clone();
-    let c1 = StepConstants::new(lr, lr.z_at(0, 4, extent), 1);
-    let e = Exposure {
-        value: &mut exposure,
-        grad: e1,
-        moments: &mut em,
-    };
-    out.applied[0] = step(&mut cpu, &g1, &mut moments, e, &c1);
-    let p1 = t.read_params().await?;
-    out.params[0] = max_abs(&flat(&p1), &flat(&cpu));
-    out.moved = max_abs(&flat(&p1), &flat(&p0));
-    // The trainer takes the exposure from its GPU buffer, not from `cam`.
-    t.step(&cam, 0, &target, mask)
-        .await
-        .map_err(|e| GpuError::Validation(e.to_string()))?;
-    let (g2, e2) = t
-        .read_grads()
-        .await?
-        .ok_or_else(|| GpuError::Validation("no gradients after a step".into()))?;
-    out.pair_overflows[1] = t.pair_overflows;
-    let c2 = StepConstants::new(lr, lr.z_at(1, 4, extent), 2);
-    let e = Exposure {
-        value: &mut exposure,
-        grad: e2,
-        moments: &mut em,
-    };
-    out.applied[1] = step(&mut cpu, &g2, &mut moments, e, &c2);
-    let p2 = t.read_params().await?;
-    out.params[1] = max_abs(&flat(&p2), &flat(&cpu));
+    let (mut grads, mut exp_grad) = (g1, e1);
+    let mut cands = vec![cand0.clone()];
+    for (k, view) in [cam, cam, near, cam].iter().enumerate() {
+        if k > 0 {
+            cands.push(crate::render::candidates::candidates(
+                &t.params.xyz,
+                view,
+                &cull,
+            ));
+            t.step(view, 0, &target, mask).await.map_err(to_gpu)?;
+            (grads, exp_grad) = t
+                .read_grads()
+                .await?
+                .ok_or_else(|| GpuError::Validation("no gradients after a step".into()))?;
+            if k == 1 {
+                out.pair_overflows[1] = t.pair_overflows;
+            }
+        }
+        let c = StepConstants::new(lr, lr.z_at(k, 4, extent), k as u32 + 1);
+        let e = Exposure {
+            value: &mut exposure,
+            grad: exp_grad,
+            moments: &mut em,
+        };
+        let touched = match mode {
+            super::AdamScope::Selective => Touched::Only(&cands[k]),
+            super::AdamScope::Dense => Touched::All,
+        };
+        if k == 3 && mode != super::AdamScope::Dense {
+            out.decayed = cands[3].iter().filter(|&&i| last[i as usize] == 2).count();
+        }
+        out.applied[k] = step(&mut cpu, &grads, &mut moments, &mut last, touched, e, &c);
+        let pk = t.read_params().await?;
+        out.params[k] = max_abs(&flat(&pk), &flat(&cpu));
+        if k == 0 {
+            out.moved = max_abs(&flat(&pk), &flat(&p0));
+        }
+    }
     let e = t.read_exposures().await?;
     out.exposure = max_abs(&e[0], &exposure);
     Ok(out)
@@ -220,27 +244,42 @@ pub struct MissedCandidate {
     pub gpu_z: f32,
 }
 
-/// A surfel uploaded 50 m up (out of the view's box, so no candidate) and then put back
-/// on the road on the GPU alone: the first step must notice it and read the positions
-/// back, the second must list it and need nothing.
-pub async fn missed_candidate(ctx: GpuContext) -> Result<MissedCandidate, GpuError> {
+/// Dense Adam: a surfel uploaded 50 m up (out of the view's box, so no candidate) and
+/// then put back on the road on the GPU alone: the first step must notice it and read
+/// the positions back, the second must list it and need nothing. Selective Adam (only
+/// candidates move, so only they can leave the host's margin): a candidate moved 2.5 m
+/// up on the GPU alone, which its step must notice.
+pub async fn missed_candidate(
+    ctx: GpuContext,
+    mode: super::AdamScope,
+) -> Result<MissedCandidate, GpuError> {
+    let selective = mode == super::AdamScope::Selective;
     let (mut p0, mut cam) = test_scene(2);
     cam.exposure = [0.0, 0.0];
     let k = 1;
     let road_z = p0.pos[k][2];
-    p0.pos[k][2] = 50.0;
+    let (uploaded, moved) = if selective {
+        (road_z, road_z + 2.5)
+    } else {
+        (50.0, road_z)
+    };
+    p0.pos[k][2] = uploaded;
     let n = p0.len();
     let z: Vec<f32> = p0.pos.iter().map(|q| q[2]).collect();
     let reg = reg_data(n, &z, &mut Rng::new(5));
     let to_gpu = |e: super::train::TrainError| GpuError::Validation(e.to_string());
-    let mut t = Trainer::new(ctx, &p0, &reg, 1, &TrainConfig::default(), 10.0, 4)
+    let cfg = TrainConfig {
+        adam: mode,
+        ..TrainConfig::default()
+    };
+    let mut t = Trainer::new(ctx, &p0, &reg, 1, &cfg, 10.0, 4)
         .await
         .map_err(to_gpu)?;
     let uploaded = t.params.xyz[k][2];
     t.ctx.queue.write_buffer(
         &t.params.pos,
         4 * (3 * k as u64 + 2),
-        bytemuck::bytes_of(&road_z),
+        bytemuck::bytes_of(&moved),
     );
     let npx = (cam.width * cam.height) as usize;
     let target = vec![0x0080_8080u32; npx];

@@ -38,6 +38,45 @@ pub struct TrainConfig {
     /// so that a step needs no read-back of its pair count (train.rs); a view with
     /// more runs again with the exact count. Below 1 only in tests, to force that.
     pub pair_margin: f64,
+    /// Which surfels' parameters a step updates (shaders/adam.wgsl).
+    pub adam: AdamScope,
+}
+
+/// Which surfels' parameters an optimisation step updates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum AdamScope {
+    /// Every parameter of every surfel, every step (the paper's Adam): a surfel out
+    /// of view moves by its regularisers' z gradient and its momentum.
+    Dense,
+    /// The view's candidates alone (selective Adam, as gsplat's SelectiveAdam): a
+    /// step's cost follows the view; a surfel catches up what the steps it missed
+    /// would have done to its moments and momentum, but the regularisers act on it
+    /// only in its views.
+    Selective,
+}
+
+impl AdamScope {
+    /// `selective` of shaders/adam.wgsl.
+    pub fn code(self) -> u32 {
+        match self {
+            Self::Dense => 0,
+            Self::Selective => 1,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Dense => "dense",
+            Self::Selective => "selective",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Self> {
+        [Self::Dense, Self::Selective]
+            .into_iter()
+            .find(|m| m.name() == s)
+    }
 }
 
 impl Default for TrainConfig {
@@ -53,6 +92,7 @@ impl Default for TrainConfig {
             max_steps: None,
             moment_window: None,
             pair_margin: 1.25,
+            adam: AdamScope::Dense,
         }
     }
 }

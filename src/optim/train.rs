@@ -7,10 +7,12 @@
 //! Step: `forward` (on the view's candidate surfels, `render::candidates`, with pair
 //! buffers sized from the pairs per candidate seen so far) → `loss` (per-pixel
 //! gradients) → `rasterize_backward` + `project_backward` (parameter gradients in
-//! place in the per-candidate view gradients) → `regularise` (z gradients of every
-//! surfel) → `adam` (every surfel; it finds a candidate's slot through membership
-//! words the host uploads with the candidates) and `step_exposure` (this view's
-//! camera), which apply nothing when the status word is raised: by `loss` when the
+//! place in the per-candidate view gradients) → `regularise` (z gradients of the
+//! candidates) → `adam` (selective, the default: the candidates alone, so a step's
+//! cost follows the view, not the model; dense, `TrainConfig::selective_adam` off:
+//! every surfel, finding a candidate's slot through membership words the host uploads
+//! with the candidates) and `step_exposure` (this view's camera), which apply nothing
+//! when the status word is raised: by `loss` when the
 //! loss is not finite or the pairs overflowed their capacity, by `project_backward`
 //! and `regularise` when a gradient was not usable (shaders/guard.wgsl). An overflow
 //! (rare: the capacity has a margin) runs the step again with the exact count.
@@ -75,6 +77,8 @@ struct Kernels {
     regularise: wgpu::ComputePipeline,
     adam: wgpu::ComputePipeline,
     exposure: wgpu::ComputePipeline,
+    /// `sync_known`: the z the host knows into the moments' blocks.
+    sync: wgpu::ComputePipeline,
     pose: PoseGrad,
 }
 
@@ -89,7 +93,8 @@ pub struct Trainer {
     /// Surfel ranges [first, end), whole blocks, whose moments fit one storage
     /// binding: one `adam` pass each.
     windows: Vec<(u32, u32)>,
-    /// The regularisers' z gradient per surfel, then the view's membership words.
+    /// Dense: the regularisers' z gradient per surfel, then the view's membership
+    /// words; selective: (z gradient, surfel) per candidate slot.
     zreg: wgpu::Buffer,
     /// The last step's view gradients (parameter gradients in place) and candidates.
     last: Option<(wgpu::Buffer, Vec<u32>)>,
@@ -172,10 +177,11 @@ const MOMENT_BLOCK: u32 = 256;
 /// Surfels per `regularise` invocation (`PER` in shaders/regularise.wgsl).
 const REGULARISE_PER: u32 = 8;
 
-/// Bytes of one block's moments: m and v of every learnable slot for the block's
-/// surfels (a multiple of 256, so every block starts at an allowed binding offset).
+/// Bytes of one block's moments: m and v of every learnable slot, the step each surfel
+/// was last stepped at and the z the host knows, for the block's surfels (a multiple
+/// of 256, so every block starts at an allowed binding offset).
 fn block_bytes(slots: u32) -> u64 {
-    8 * slots as u64 * MOMENT_BLOCK as u64
+    4 * (2 * slots as u64 + 2) * MOMENT_BLOCK as u64
 }
 
 /// Bytes of the moments of `n` surfels (whole blocks).
@@ -219,7 +225,10 @@ impl Trainer {
             .moment_window
             .map(|b| (b as u32).saturating_mul(MOMENT_BLOCK));
         // The shaders' layout constants come from here, so host and kernel agree.
-        let block = format!("const BLOCK: u32 = {MOMENT_BLOCK}u;");
+        let block = format!(
+            "const BLOCK: u32 = {MOMENT_BLOCK}u;\nconst Z_MARGIN: f32 = {:?};",
+            crate::render::candidates::Z_MARGIN
+        );
         let adam_src = [block.as_str(), include_str!("../../shaders/adam.wgsl")];
         let per = format!("const PER: u32 = {REGULARISE_PER}u;");
         let k = Kernels {
@@ -242,6 +251,7 @@ impl Trainer {
             ),
             adam: pipeline(&ctx, "adam", &adam_src, "main"),
             exposure: pipeline(&ctx, "adam_exposure", &adam_src, "step_exposure"),
+            sync: pipeline(&ctx, "adam_sync_known", &adam_src, "sync_known"),
             pose: PoseGrad::new(&ctx),
         };
         let n = p.len() as u64;
@@ -252,7 +262,9 @@ impl Trainer {
             moments: storage(&ctx, "moments", moment_bytes(n as u32, slots)),
             windows,
             status: storage(&ctx, "status", 8),
-            zreg: storage(&ctx, "zreg", 4 * (n + 2 * n.div_ceil(32))),
+            // Dense: n gradients and the membership words; selective: two words
+            // per candidate.
+            zreg: storage(&ctx, "zreg", 4 * (2 * n).max(n + 2 * n.div_ceil(32))),
             last: None,
             adj_start: init_storage(&ctx, "adj_start", bytes_of(&reg.adj_start)),
             adj: init_storage(&ctx, "adj", bytes_of(&reg.adj)),
@@ -273,10 +285,42 @@ impl Trainer {
             params,
             ctx,
         };
+        me.sync_known();
         if let Some(e) = scope.pop().await {
             return Err(GpuError::Validation(e.to_string()).into());
         }
         Ok(me)
+    }
+
+    /// Copies the z of every surfel, as the host now knows it, into the moments'
+    /// blocks (`sync_known` of shaders/adam.wgsl), for selective Adam's margin check.
+    fn sync_known(&self) {
+        let ctx = &self.ctx;
+        let slots = learnable(self.params.channels as usize) as u32;
+        let mut enc = ctx.device.create_command_encoder(&Default::default());
+        for &(first, end) in &self.windows {
+            let (wg, row) = grid_1d(ctx, end - first);
+            let mut u = [0u32; 28];
+            (u[0], u[1], u[19], u[20], u[21]) = (self.params.count, row, first, slots, end);
+            let u = uniform(ctx, "adam_sync_params", bytes_of(&u));
+            let moments = window(
+                &self.moments,
+                (first / MOMENT_BLOCK) as u64 * block_bytes(slots),
+                moment_bytes(end - first, slots),
+            );
+            let k = &self.k.sync;
+            let bg = bind_ranges(
+                ctx,
+                k,
+                &[
+                    (0, u.as_entire_buffer_binding()),
+                    (2, moments),
+                    (3, self.params.pos.as_entire_buffer_binding()),
+                ],
+            );
+            dispatch(&mut enc, k, &bg, wg);
+        }
+        ctx.queue.submit([enc.finish()]);
     }
 
     /// GPU bytes held per surfel between steps: parameters, Adam moments, z gradients
@@ -427,9 +471,15 @@ impl Trainer {
         let step = self.steps_done;
         let n = self.params.count;
         let view_grad = storage(ctx, "view_grad", 4 * view_grad_len(&f) as u64);
-        let words = membership(&f.cand, n as usize);
-        ctx.queue
-            .write_buffer(&self.zreg, 4 * n as u64, bytemuck::cast_slice(&words));
+        let mode = self.cfg.adam;
+        // Regularisers and `adam` over the candidate slots alone.
+        let selective = mode == super::AdamScope::Selective;
+        let nc = f.cand.len() as u32;
+        if !selective {
+            let words = membership(&f.cand, n as usize);
+            ctx.queue
+                .write_buffer(&self.zreg, 4 * n as u64, bytemuck::cast_slice(&words));
+        }
         self.raster.encode_backward(
             ctx,
             &mut enc,
@@ -449,13 +499,15 @@ impl Trainer {
                 .encode(ctx, &mut enc, &self.params, &f, &view_grad, c)
         });
         let pose_floats = pose.as_ref().map_or(0, |p| 6 * p.groups);
-        let (sg, srow) = grid_1d(ctx, n.div_ceil(REGULARISE_PER));
+        // Selective: over the candidate slots; dense: over every surfel.
+        let over = if selective { nc } else { n };
+        let (sg, srow) = grid_1d(ctx, over.div_ceil(REGULARISE_PER));
         let w = &self.reg;
         let rp: [u32; 8] = [
             n,
             srow,
-            0,
-            0,
+            selective as u32,
+            nc,
             w.smooth.to_bits(),
             w.traj.to_bits(),
             w.huber.to_bits(),
@@ -484,6 +536,7 @@ impl Trainer {
                 (6, &readback),
                 (7, &self.status),
                 (8, &f.view),
+                (9, &f.cand_buf),
             ],
         );
         dispatch(&mut enc, &self.k.regularise, &bg, sg);
@@ -494,40 +547,55 @@ impl Trainer {
             step as u32 + 1,
         );
         let slots = learnable(ch as usize) as u32;
-        let au = |(first, end): (u32, u32), row: u32| -> [u32; 24] {
-            [
-                n,
-                row,
-                stride,
-                camera as u32,
-                c.lr_z.to_bits(),
-                c.lr_rotation.to_bits(),
-                c.lr_scale.to_bits(),
-                c.lr_opacity.to_bits(),
-                c.lr_rgb.to_bits(),
-                c.lr_logits.to_bits(),
-                c.lr_exposure.to_bits(),
-                c.beta1.to_bits(),
-                c.beta2.to_bits(),
-                c.eps.to_bits(),
-                c.bias1.to_bits(),
-                c.bias2.to_bits(),
-                stride * f.cand.len() as u32,
-                ch,
-                self.cameras as u32,
-                first,
-                slots,
-                end,
-                0,
-                0,
-            ]
-        };
+        let au =
+            |(first, end): (u32, u32), row: u32, pass: u32, (s0, s1): (u32, u32)| -> [u32; 28] {
+                [
+                    n,
+                    row,
+                    stride,
+                    camera as u32,
+                    c.lr_z.to_bits(),
+                    c.lr_rotation.to_bits(),
+                    c.lr_scale.to_bits(),
+                    c.lr_opacity.to_bits(),
+                    c.lr_rgb.to_bits(),
+                    c.lr_logits.to_bits(),
+                    c.lr_exposure.to_bits(),
+                    c.beta1.to_bits(),
+                    c.beta2.to_bits(),
+                    c.eps.to_bits(),
+                    c.bias1.to_bits(),
+                    c.bias2.to_bits(),
+                    stride * f.cand.len() as u32,
+                    ch,
+                    self.cameras as u32,
+                    first,
+                    slots,
+                    end,
+                    pass,
+                    s0,
+                    s1,
+                    step as u32 + 1,
+                    0,
+                    0,
+                ]
+            };
         let p = &self.params;
         // One pass per window of blocks whose moments fit one binding (usually one).
         let k = &self.k.adam;
         for &(first, end) in &self.windows {
-            let (wg, row) = grid_1d(ctx, end - first);
-            let u = uniform(ctx, "adam_params", bytes_of(&au((first, end), row)));
+            // Selective: the candidate slots whose surfels lie in the window.
+            let s0 = f.cand.partition_point(|&c| c < first) as u32;
+            let s1 = f.cand.partition_point(|&c| c < end) as u32;
+            if selective && s1 == s0 {
+                continue;
+            }
+            let (wg, row) = grid_1d(ctx, if selective { s1 - s0 } else { end - first });
+            let u = uniform(
+                ctx,
+                "adam_params",
+                bytes_of(&au((first, end), row, mode.code(), (s0, s1))),
+            );
             let moments = window(
                 &self.moments,
                 (first / MOMENT_BLOCK) as u64 * block_bytes(slots),
@@ -555,7 +623,7 @@ impl Trainer {
         }
         // Auto layouts hold only what an entry uses: the exposure's step needs no
         // surfel buffers.
-        let au = uniform(ctx, "adam_params", bytes_of(&au((0, 0), 0)));
+        let au = uniform(ctx, "adam_params", bytes_of(&au((0, 0), 0, 0, (0, 0))));
         let e = &self.k.exposure;
         let bg = bind(
             ctx,
@@ -630,10 +698,12 @@ impl Trainer {
         Ok(Try::Done(loss, pose))
     }
 
-    /// Reads the positions back into the host's copy that candidate lists use.
+    /// Reads the positions back into the host's copy that candidate lists use (and
+    /// selective Adam's margin check).
     async fn refresh_positions(&mut self) -> Result<(), GpuError> {
         let pos = read_f32(&self.ctx, &self.params.pos, 3 * self.params.count as usize).await?;
         self.params.xyz = pos.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        self.sync_known();
         self.position_refreshes += 1;
         Ok(())
     }
@@ -649,9 +719,16 @@ impl Trainer {
         let flat = read_f32(&self.ctx, view_grad, (VIEW_GRAD + ch) * cand.len() + 2).await?;
         let (g, e) = unpack_grads(&flat, ch);
         let mut g = scatter(&g, cand, n);
-        let zreg = read_f32(&self.ctx, &self.zreg, n).await?;
-        for (p, z) in g.pos.iter_mut().zip(zreg) {
-            p[2] += z;
+        if self.cfg.adam == super::AdamScope::Selective {
+            let zreg = read_f32(&self.ctx, &self.zreg, 2 * cand.len()).await?;
+            for (z, &i) in zreg.chunks_exact(2).zip(cand) {
+                g.pos[i as usize][2] += z[0];
+            }
+        } else {
+            let zreg = read_f32(&self.ctx, &self.zreg, n).await?;
+            for (p, z) in g.pos.iter_mut().zip(zreg) {
+                p[2] += z;
+            }
         }
         Ok(Some((g, e)))
     }

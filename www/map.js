@@ -46,6 +46,8 @@ function settings() {
     ...optionalNumber('lidar_band', 'set-lidar-band'),
     ...optionalNumber('max_steps', 'set-max-steps'),
     seed: Number($('set-seed').value) || 0,
+    adam: $('set-adam').value,
+    ...($('set-pose-rig').checked ? { pose_rig: true } : {}),
     ...faultTile(),
   };
 }

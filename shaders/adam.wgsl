@@ -53,41 +53,7 @@
 //!
 //! Oracle: src/optim/adam.rs.
 
-struct AdamParams {
-    count: u32,
-    row: u32,
-    grad_stride: u32,
-    camera: u32,
-    lr_z: f32,
-    lr_rotation: f32,
-    lr_scale: f32,
-    lr_opacity: f32,
-    lr_rgb: f32,
-    lr_logits: f32,
-    lr_exposure: f32,
-    beta1: f32,
-    beta2: f32,
-    eps: f32,
-    bias1: f32,
-    bias2: f32,
-    exposure_at: u32,
-    channels: u32,
-    cameras: u32,
-    // The first surfel of this pass (a multiple of BLOCK: its window starts a block).
-    first: u32,
-    // L, the learnable slots per surfel.
-    learnable: u32,
-    // One past the last surfel of this pass.
-    end: u32,
-    // 0: dense; 1: selective (candidate slots [cand_first, cand_end) this pass).
-    selective: u32,
-    cand_first: u32,
-    cand_end: u32,
-    // t, this step (from 1).
-    step: u32,
-    pad0: u32,
-    pad1: u32,
-}
+// `AdamParams` (the uniform block) is generated from src/optim/train.rs and prepended.
 
 @group(0) @binding(0) var<uniform> ap: AdamParams;
 @group(0) @binding(1) var<storage, read> grads: array<f32>;

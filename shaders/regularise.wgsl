@@ -28,17 +28,7 @@
 //!
 //! Oracle: src/loss/regularise.rs.
 
-struct RegParams {
-    count: u32,
-    row: u32,
-    // 1: over the candidates (`cand_count` slots); 0: over every surfel.
-    selective: u32,
-    cand_count: u32,
-    w_smooth: f32,
-    w_traj: f32,
-    huber: f32,
-    w_lidar: f32,
-}
+// `RegParams` (the uniform block) is generated from src/optim/train.rs and prepended.
 
 @group(0) @binding(0) var<uniform> rp: RegParams;
 @group(0) @binding(1) var<storage, read> pos: array<f32>;

@@ -6,6 +6,7 @@
 //! so there kernels use a compare-and-swap loop on `atomic<u32>` bit patterns.
 
 pub mod buffers;
+pub mod contract;
 pub mod radix_sort;
 pub mod readback;
 pub mod scatter_add;

@@ -170,6 +170,67 @@ pub fn check_fits(
     Ok(())
 }
 
+crate::uniform_block! {
+    /// The uniform of shaders/adam.wgsl.
+    pub struct AdamParams {
+        /// Surfels in the model.
+        count: u32,
+        /// Invocations per dispatch row (2D dispatches).
+        row: u32,
+        /// Floats per candidate's view-gradient slot.
+        grad_stride: u32,
+        /// This view's camera (its exposure).
+        camera: u32,
+        lr_z: f32,
+        lr_rotation: f32,
+        lr_scale: f32,
+        lr_opacity: f32,
+        lr_rgb: f32,
+        lr_logits: f32,
+        lr_exposure: f32,
+        beta1: f32,
+        beta2: f32,
+        eps: f32,
+        /// 1 − β1ᵗ and 1 − β2ᵗ.
+        bias1: f32,
+        bias2: f32,
+        /// Where the exposure's gradient is in the view gradients.
+        exposure_at: u32,
+        channels: u32,
+        cameras: u32,
+        /// The first surfel of this pass (a multiple of the block: its window
+        /// starts a block).
+        first: u32,
+        /// L, the learnable slots per surfel.
+        learnable: u32,
+        /// One past the last surfel of this pass.
+        end: u32,
+        /// 0: dense; 1: selective (candidate slots [cand_first, cand_end)).
+        selective: u32,
+        cand_first: u32,
+        cand_end: u32,
+        /// t, this step (from 1).
+        step: u32,
+        pad0: u32,
+        pad1: u32,
+    }
+}
+
+crate::uniform_block! {
+    /// The uniform of shaders/regularise.wgsl.
+    pub struct RegParams {
+        count: u32,
+        row: u32,
+        /// 1: over the candidates (`cand_count` slots); 0: over every surfel.
+        selective: u32,
+        cand_count: u32,
+        w_smooth: f32,
+        w_traj: f32,
+        huber: f32,
+        w_lidar: f32,
+    }
+}
+
 /// Surfels per block of Adam moments: the `adam` workgroup (`BLOCK` in
 /// shaders/adam.wgsl), which `grid_1d`'s workgroups of 256 match.
 const MOMENT_BLOCK: u32 = 256;
@@ -229,7 +290,11 @@ impl Trainer {
             "const BLOCK: u32 = {MOMENT_BLOCK}u;\nconst Z_MARGIN: f32 = {:?};",
             crate::render::candidates::Z_MARGIN
         );
-        let adam_src = [block.as_str(), include_str!("../../shaders/adam.wgsl")];
+        let adam_src = [
+            block.as_str(),
+            AdamParams::WGSL,
+            include_str!("../../shaders/adam.wgsl"),
+        ];
         let per = format!("const PER: u32 = {REGULARISE_PER}u;");
         let k = Kernels {
             loss: pipeline(
@@ -245,6 +310,7 @@ impl Trainer {
                     VIEW_WGSL,
                     GUARD_WGSL,
                     &per,
+                    RegParams::WGSL,
                     include_str!("../../shaders/regularise.wgsl"),
                 ],
                 "main",
@@ -300,9 +366,15 @@ impl Trainer {
         let mut enc = ctx.device.create_command_encoder(&Default::default());
         for &(first, end) in &self.windows {
             let (wg, row) = grid_1d(ctx, end - first);
-            let mut u = [0u32; 28];
-            (u[0], u[1], u[19], u[20], u[21]) = (self.params.count, row, first, slots, end);
-            let u = uniform(ctx, "adam_sync_params", bytes_of(&u));
+            let u = AdamParams {
+                count: self.params.count,
+                row,
+                first,
+                learnable: slots,
+                end,
+                ..AdamParams::default()
+            };
+            let u = uniform(ctx, "adam_sync_params", bytemuck::bytes_of(&u));
             let moments = window(
                 &self.moments,
                 (first / MOMENT_BLOCK) as u64 * block_bytes(slots),
@@ -503,17 +575,17 @@ impl Trainer {
         let over = if selective { nc } else { n };
         let (sg, srow) = grid_1d(ctx, over.div_ceil(REGULARISE_PER));
         let w = &self.reg;
-        let rp: [u32; 8] = [
-            n,
-            srow,
-            selective as u32,
-            nc,
-            w.smooth.to_bits(),
-            w.traj.to_bits(),
-            w.huber.to_bits(),
-            w.lidar.to_bits(),
-        ];
-        let rp = uniform(ctx, "reg_params", bytes_of(&rp));
+        let rp = RegParams {
+            count: n,
+            row: srow,
+            selective: selective as u32,
+            cand_count: nc,
+            w_smooth: w.smooth,
+            w_traj: w.traj,
+            huber: w.huber,
+            w_lidar: w.lidar,
+        };
+        let rp = uniform(ctx, "reg_params", bytemuck::bytes_of(&rp));
         let swgs = (sg.0 * sg.1) as usize;
         // Read back at the end: the regulariser's partial sums, the two status words,
         // the pair count and the loss's partial sums.
@@ -548,37 +620,35 @@ impl Trainer {
         );
         let slots = learnable(ch as usize) as u32;
         let au =
-            |(first, end): (u32, u32), row: u32, pass: u32, (s0, s1): (u32, u32)| -> [u32; 28] {
-                [
-                    n,
-                    row,
-                    stride,
-                    camera as u32,
-                    c.lr_z.to_bits(),
-                    c.lr_rotation.to_bits(),
-                    c.lr_scale.to_bits(),
-                    c.lr_opacity.to_bits(),
-                    c.lr_rgb.to_bits(),
-                    c.lr_logits.to_bits(),
-                    c.lr_exposure.to_bits(),
-                    c.beta1.to_bits(),
-                    c.beta2.to_bits(),
-                    c.eps.to_bits(),
-                    c.bias1.to_bits(),
-                    c.bias2.to_bits(),
-                    stride * f.cand.len() as u32,
-                    ch,
-                    self.cameras as u32,
-                    first,
-                    slots,
-                    end,
-                    pass,
-                    s0,
-                    s1,
-                    step as u32 + 1,
-                    0,
-                    0,
-                ]
+            |(first, end): (u32, u32), row: u32, (cand_first, cand_end): (u32, u32)| AdamParams {
+                count: n,
+                row,
+                grad_stride: stride,
+                camera: camera as u32,
+                lr_z: c.lr_z,
+                lr_rotation: c.lr_rotation,
+                lr_scale: c.lr_scale,
+                lr_opacity: c.lr_opacity,
+                lr_rgb: c.lr_rgb,
+                lr_logits: c.lr_logits,
+                lr_exposure: c.lr_exposure,
+                beta1: c.beta1,
+                beta2: c.beta2,
+                eps: c.eps,
+                bias1: c.bias1,
+                bias2: c.bias2,
+                exposure_at: stride * f.cand.len() as u32,
+                channels: ch,
+                cameras: self.cameras as u32,
+                first,
+                learnable: slots,
+                end,
+                selective: mode.code(),
+                cand_first,
+                cand_end,
+                step: step as u32 + 1,
+                pad0: 0,
+                pad1: 0,
             };
         let p = &self.params;
         // One pass per window of blocks whose moments fit one binding (usually one).
@@ -594,7 +664,7 @@ impl Trainer {
             let u = uniform(
                 ctx,
                 "adam_params",
-                bytes_of(&au((first, end), row, mode.code(), (s0, s1))),
+                bytemuck::bytes_of(&au((first, end), row, (s0, s1))),
             );
             let moments = window(
                 &self.moments,
@@ -623,7 +693,11 @@ impl Trainer {
         }
         // Auto layouts hold only what an entry uses: the exposure's step needs no
         // surfel buffers.
-        let au = uniform(ctx, "adam_params", bytes_of(&au((0, 0), 0, 0, (0, 0))));
+        let au = uniform(
+            ctx,
+            "adam_params",
+            bytemuck::bytes_of(&au((0, 0), 0, (0, 0))),
+        );
         let e = &self.k.exposure;
         let bg = bind(
             ctx,

@@ -19,20 +19,7 @@
 //!
 //! Oracle: src/loss/photometric.rs.
 
-struct LossParams {
-    width: u32,
-    height: u32,
-    channels: u32,
-    row: u32,
-    inv_n: f32,
-    w_rgb: f32,
-    w_ce: f32,
-    min_alpha: f32,
-    capacity: u32,
-    pad0: u32,
-    pad1: u32,
-    pad2: u32,
-}
+// `LossParams` (the uniform block) is generated from src/optim/train.rs and prepended.
 
 @group(0) @binding(0) var<uniform> lp: LossParams;
 @group(0) @binding(1) var<storage, read> px_out: array<f32>;

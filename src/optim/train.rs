@@ -217,6 +217,27 @@ crate::uniform_block! {
 }
 
 crate::uniform_block! {
+    /// The uniform of shaders/loss.wgsl.
+    pub struct LossParams {
+        width: u32,
+        height: u32,
+        channels: u32,
+        /// Invocations per dispatch row (2D dispatches).
+        row: u32,
+        /// 1 / the pixels the loss counts.
+        inv_n: f32,
+        w_rgb: f32,
+        w_ce: f32,
+        min_alpha: f32,
+        /// The pairs the view's buffers hold (more: the step is refused).
+        capacity: u32,
+        pad0: u32,
+        pad1: u32,
+        pad2: u32,
+    }
+}
+
+crate::uniform_block! {
     /// The uniform of shaders/regularise.wgsl.
     pub struct RegParams {
         count: u32,
@@ -300,7 +321,11 @@ impl Trainer {
             loss: pipeline(
                 &ctx,
                 "loss",
-                &[GUARD_WGSL, include_str!("../../shaders/loss.wgsl")],
+                &[
+                    GUARD_WGSL,
+                    LossParams::WGSL,
+                    include_str!("../../shaders/loss.wgsl"),
+                ],
                 "main",
             ),
             regularise: pipeline(
@@ -503,21 +528,19 @@ impl Trainer {
             .await?;
         let npx = cam.width * cam.height;
         let (groups, row) = grid_1d(ctx, npx);
-        let lp: [u32; 12] = [
-            cam.width,
-            cam.height,
-            ch,
+        let lp = LossParams {
+            width: cam.width,
+            height: cam.height,
+            channels: ch,
             row,
-            (1.0 / mask_count.max(1) as f32).to_bits(),
-            self.cfg.loss.rgb.to_bits(),
-            self.cfg.loss.ce.to_bits(),
-            self.cfg.loss.min_alpha.to_bits(),
-            f.capacity,
-            0,
-            0,
-            0,
-        ];
-        let lp = uniform(ctx, "loss_params", bytes_of(&lp));
+            inv_n: 1.0 / mask_count.max(1) as f32,
+            w_rgb: self.cfg.loss.rgb,
+            w_ce: self.cfg.loss.ce,
+            min_alpha: self.cfg.loss.min_alpha,
+            capacity: f.capacity,
+            ..LossParams::default()
+        };
+        let lp = uniform(ctx, "loss_params", bytemuck::bytes_of(&lp));
         let g_px = storage(ctx, "g_px", 4 * 5 * npx as u64);
         let g_logits = storage(ctx, "g_logits", 4 * (ch * npx) as u64);
         let wgs = (groups.0 * groups.1) as usize;

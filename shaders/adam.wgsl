@@ -1,7 +1,7 @@
 //! adam: one Adam step of the learnable surfel parameters, in place, with per-group
 //! learning rates, and one step of the view's camera exposure (a, b).
 //!
-//! Selective (`ap.selective`, the default): only the view's candidates take a step,
+//! Selective (`ap.selective` 1, `--adam selective`): only the view's candidates take a step,
 //! as gsplat's SelectiveAdam and Taming 3DGS do, so a step's cost follows the view
 //! (5 % of a 5 cm `nuscenes-like` model), not the model. Invocation j takes candidate
 //! slot j: `regularise` left (z gradient, surfel) at `zreg[2j]`, and the photometric
@@ -10,13 +10,14 @@
 //! decay by β1ᵏ and β2ᵏ, and it moves by its momentum, Σⱼ₌₁..ₖ rʲ (r = β1/√β2) times
 //! its last normalised moment at this step's rate. Without that move, a surfel seen by
 //! a few views of a one-epoch run lost the ~1/(1 − β1) = 10 steps its momentum carries
-//! it under dense Adam (`demo` at 10 cm: −0.4 dB, −0.03 mIoU). The step it was last stepped at and the z the host last
-//! knew (`sync_known` copies it) sit in its block after its moments; a stepped surfel
+//! it under dense Adam (`demo` at 10 cm: −0.4 dB, −0.03 mIoU). The step it was last
+//! stepped at and the z the host last knew (`sync_known` copies it) sit in its block
+//! after its moments; a stepped surfel
 //! whose z leaves `Z_MARGIN` of the host's raises `status[1]`, and the host reads the
 //! positions back before the next view (src/render/candidates.rs: only stepped
 //! surfels move, so this is the whole check).
 //!
-//! Dense:
+//! Dense (0, the default): every surfel takes a step.
 //! Gradients are read where `project_backward` left them, in place at the head of each
 //! view candidate's view-gradient slot (`grad_stride` = 18 + channels apart):
 //! position 3, rotation 4, log-scales 2, opacity, rgb 3, logits. A surfel finds its
@@ -225,7 +226,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let g = gid.x + gid.y * ap.row;
     if ap.selective == 1u {
         selective(g);
-
     } else {
         dense(g);
     }

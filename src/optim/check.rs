@@ -145,9 +145,10 @@ pub async fn compare_step(
     let w = reg.weights(&cfg.loss, true);
     let cand0 = crate::render::candidates::candidates(&p0.pos, &cam, &cull);
     let all: Vec<u32> = (0..n as u32).collect();
-    let over = |c: &[u32]| if selective { c.to_vec() } else { all.clone() };
-    let (rl, rz) = regularise_over(&reg, &w, &z, &over(&cand0));
-    for (&i, dz) in over(&cand0).iter().zip(&rz) {
+    // The surfels the regularisers cover: the candidates under selective Adam.
+    let over = if selective { &cand0 } else { &all };
+    let (rl, rz) = regularise_over(&reg, &w, &z, over);
+    for (&i, dz) in over.iter().zip(&rz) {
         g.pos[i as usize][2] += dz;
     }
     let to_gpu = |e: super::train::TrainError| GpuError::Validation(e.to_string());

@@ -7,12 +7,12 @@
 //! Step: `forward` (on the view's candidate surfels, `render::candidates`, with pair
 //! buffers sized from the pairs per candidate seen so far) → `loss` (per-pixel
 //! gradients) → `rasterize_backward` + `project_backward` (parameter gradients in
-//! place in the per-candidate view gradients) → `regularise` (z gradients of the
-//! candidates) → `adam` (selective, the default: the candidates alone, so a step's
-//! cost follows the view, not the model; dense, `TrainConfig::selective_adam` off:
-//! every surfel, finding a candidate's slot through membership words the host uploads
-//! with the candidates) and `step_exposure` (this view's camera), which apply nothing
-//! when the status word is raised: by `loss` when the
+//! place in the per-candidate view gradients) → `regularise` (z gradients of every
+//! surfel) → `adam` (dense, the default: every surfel, finding a candidate's slot
+//! through membership words the host uploads with the candidates; with
+//! `TrainConfig::adam` selective, both run over the candidates alone, so a step's cost
+//! follows the view, not the model) and `step_exposure` (this view's camera), which
+//! apply nothing when the status word is raised: by `loss` when the
 //! loss is not finite or the pairs overflowed their capacity, by `project_backward`
 //! and `regularise` when a gradient was not usable (shaders/guard.wgsl). An overflow
 //! (rare: the capacity has a margin) runs the step again with the exact count.
@@ -384,8 +384,12 @@ impl Trainer {
     }
 
     /// Copies the z of every surfel, as the host now knows it, into the moments'
-    /// blocks (`sync_known` of shaders/adam.wgsl), for selective Adam's margin check.
+    /// blocks (`sync_known` of shaders/adam.wgsl), for selective Adam's margin check
+    /// (dense Adam's check is `regularise`'s and reads none of it).
     fn sync_known(&self) {
+        if self.cfg.adam != super::AdamScope::Selective {
+            return;
+        }
         let ctx = &self.ctx;
         let slots = learnable(self.params.channels as usize) as u32;
         let mut enc = ctx.device.create_command_encoder(&Default::default());

@@ -43,10 +43,21 @@ fn main() -> Result<(), String> {
         write_zip(&demo.manifest, &demo.files)?,
     )
     .map_err(|e| e.to_string())?;
+    // A drive without masks: the same tiny scene with its labels left out.
+    let cfg = rogs::synth::SynthConfig {
+        labels: false,
+        ..rogs::synth::SynthConfig::preset(rogs::synth::Preset::Tiny, 1)
+    };
+    let bare = rogs::synth::generate(&cfg, &|_, _, _| {})?;
+    std::fs::write(
+        out.join("unlabelled.zip"),
+        write_zip(&bare.manifest, &bare.files)?,
+    )
+    .map_err(|e| e.to_string())?;
     maps(&out)?;
     splats(&out)?;
     eprintln!(
-        "wrote {}/valid.zip, invalid.zip, demo.zip and the map files",
+        "wrote {}/valid.zip, invalid.zip, demo.zip, unlabelled.zip and the map files",
         out.display()
     );
     Ok(())

@@ -56,7 +56,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wg
         if cls != 255u && px_out[o + 4u] >= lp.min_alpha {
             let tc = vec3<f32>(f32(t & 255u), f32((t >> 8u) & 255u), f32((t >> 16u) & 255u)) / 255.0;
             let d = vec3<f32>(px_out[o], px_out[o + 1u], px_out[o + 2u]) - tc;
-            let k_rgb = lp.w_rgb * lp.inv_n / 3.0;
+            // Robust weighting (drives without labels, where cars and people are in
+            // the mask): a Cauchy weight 1 / (1 + (r/c)²) of the pixel's mean
+            // residual r, held constant in the gradient (one IRLS step per step).
+            var wr = 1.0;
+            if lp.robust_c > 0.0 {
+                let r = (abs(d.x) + abs(d.y) + abs(d.z)) / 3.0 / lp.robust_c;
+                wr = 1.0 / (1.0 + r * r);
+            }
+            let k_rgb = lp.w_rgb * lp.inv_n / 3.0 * wr;
             l.x = k_rgb * (abs(d.x) + abs(d.y) + abs(d.z));
             let s = sign(d) * k_rgb;
             g_px[g] = s.x;

@@ -96,7 +96,7 @@ pub fn check_cameras_fit(
     m: &crate::bundle::Manifest,
     ctx: &GpuContext,
 ) -> Result<(), ReconstructError> {
-    let per_px = crate::render::gpu::view_bytes_per_pixel(m.semantic_classes.len().max(1));
+    let per_px = crate::render::gpu::view_bytes_per_pixel(m.classes().len().max(1));
     let limit = ctx.limits.max_storage_buffer_binding_size;
     for c in &m.cameras {
         let bytes = c.width as u64 * c.height as u64 * per_px;
@@ -290,7 +290,7 @@ pub struct Session {
 /// Dense channel and class id of every road class (the BEV semantic layer's choices).
 pub fn road_channels(b: &Bundle) -> Vec<(usize, u8)> {
     b.manifest
-        .semantic_classes
+        .classes()
         .iter()
         .enumerate()
         .filter(|(_, c)| c.role == ClassRole::Road)
@@ -458,7 +458,7 @@ impl Session {
     fn target(&self, b: &Bundle, v: &ViewRef) -> Result<(Vec<u32>, usize), Problem> {
         let view = &b.manifest.frames[v.frame].views[v.view];
         let rgb = b.read_rgb(&view.image)?;
-        let label = b.read_label(&view.label)?;
+        let label = b.read_view_label(v.frame, v.view)?;
         let l = &self.cfg.train.loss;
         Ok(targets::pack(
             &b.manifest,

@@ -96,6 +96,10 @@ pub struct Settings {
     /// surfels its view may see).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub adam: Option<String>,
+    /// Robust weighting scale of the RGB term (`LossConfig::robust_c`; 0, the
+    /// default, disables it; docs/QUALITY.md says what it costs on parked cars).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub robust_c: Option<f32>,
 }
 
 /// What a front end uses where a setting is absent.
@@ -185,6 +189,15 @@ impl Settings {
         if let Some(v) = finite("lr_z_end", self.lr_z_end, "1.6e-5")? {
             c.train.lr.z_end = v;
         }
+        c.train.loss.robust_c = match self.robust_c {
+            Some(r) if !(r.is_finite() && r >= 0.0) => {
+                return Err(format!(
+                    "robust_c {r}: expected 0 (off) or a positive colour residual, such as 0.1"
+                ))
+            }
+            Some(r) => r,
+            None => 0.0,
+        };
         if let Some(a) = self.adam.as_deref() {
             c.train.adam = crate::optim::AdamScope::parse(a)
                 .ok_or_else(|| format!("adam {a:?}: expected \"dense\" or \"selective\""))?;

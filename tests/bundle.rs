@@ -345,7 +345,7 @@ fn path_traversal_is_refused() {
     // In the manifest …
     let (mut m, files) = example::tiny();
     m.frames[0].views[0].image = "../../etc/passwd".into();
-    m.frames[1].views[0].label = "/abs/label.png".into();
+    m.frames[1].views[0].label = Some("/abs/label.png".into());
     let p = problems(&m, &files);
     assert!(
         matches!(&p[0], Problem::UnsafePath { field, .. } if field == "frames[0].views[0].image"),
@@ -708,14 +708,15 @@ fn legal_but_useless_bundles_are_warned_with_advice() {
         let mut v = f.views[0].clone();
         v.camera = "rear".into();
         v.image = format!("images/rear/{i:06}.png");
-        v.label = format!("labels/rear/{i:06}.png");
+        let label = format!("labels/rear/{i:06}.png");
+        v.label = Some(label.clone());
         let img = files
             .iter()
             .find(|(p, _)| *p == f.views[0].image)
             .expect("image");
         files2.push((v.image.clone(), img.1.clone()));
         files2.push((
-            v.label.clone(),
+            label,
             png_gray(&image::GrayImage::from_pixel(64, 48, image::Luma([10]))),
         ));
         f.views.push(v);
@@ -727,4 +728,72 @@ fn legal_but_useless_bundles_are_warned_with_advice() {
         "{w:?}"
     );
     assert!(!w.iter().any(|s| s.contains("camera front")), "{w:?}");
+}
+
+/// A drive without masks: no view has a label and the class table may be empty; a
+/// camera's body mask is read and checked like a label; a bundle where only some
+/// views have labels is refused by the first view without one.
+#[test]
+fn a_drive_without_labels_is_valid_and_partial_labels_are_refused_by_view() {
+    let (mut m, mut files) = example::tiny();
+    let labels: Vec<String> = m
+        .frames
+        .iter()
+        .flat_map(|f| &f.views)
+        .filter_map(|v| v.label.clone())
+        .collect();
+    // Some views without a label: refused, naming the first.
+    let mut partial = m.clone();
+    partial.frames[1].views[0].label = None;
+    let p = named(&problems(&partial, &files));
+    assert!(
+        p.iter().any(|(f, msg)| f == "frames[1].views[0].label"
+            && msg.contains("other views have one")),
+        "{p:?}"
+    );
+    // No labels at all, no class table (and so no truth, whose classes it names).
+    for f in &mut m.frames {
+        for v in &mut f.views {
+            v.label = None;
+        }
+    }
+    files.retain(|(p, _)| !labels.contains(p));
+    let b = open(&m, &files).expect("valid without labels");
+    assert!(!b.manifest.labelled() && !b.summary().labelled);
+    assert!(b.summary().to_text().contains("labels      none"));
+    // Its labels are the road plane the camera sees: the bottom row, not the top.
+    let l = b.read_view_label(0, 0).expect("surface label");
+    assert_eq!(l.get_pixel(10, 47).0[0], rogs::bundle::SURFACE_ID);
+    assert_eq!(l.get_pixel(10, 0).0[0], 0);
+    let mut bare = m.clone();
+    bare.semantic_classes.clear();
+    bare.ground_truth = None;
+    open(&bare, &files).expect("valid without a class table");
+    // A body mask of the camera's size covers the bottom rows; of another size, named.
+    m.cameras[0].mask = Some("masks/front.png".into());
+    let body = image::GrayImage::from_fn(64, 48, |_, y| image::Luma([(y >= 40) as u8 * 255]));
+    files.push(("masks/front.png".into(), png_gray(&body)));
+    let b = open(&m, &files).expect("valid with a body mask");
+    assert!(b.view_files(0, 0).contains(&"masks/front.png"));
+    let l = b.read_view_label(0, 0).expect("surface label");
+    assert_eq!(l.get_pixel(10, 47).0[0], 0, "the body is never supervised");
+    assert_eq!(l.get_pixel(10, 39).0[0], rogs::bundle::SURFACE_ID);
+    replace(
+        &mut files,
+        "masks/front.png",
+        png_gray(&image::GrayImage::new(32, 48)),
+    );
+    let p = problems(&m, &files);
+    assert!(
+        matches!(
+            &p[..],
+            [Problem::ImageSize {
+                found_w: 32,
+                expected_w: 64,
+                ..
+            }]
+        ),
+        "{p:?}"
+    );
+    assert_eq!(p[0].location(), "masks/front.png");
 }

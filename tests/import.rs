@@ -141,10 +141,8 @@ fn kitti_sample_gives_a_valid_bundle_whose_road_lands_on_road_labels() {
     // Frame 0 is the world origin, on the road, z up.
     assert!(max_diff(&m.frames[0].vehicle_to_world, &rows(DMat4::IDENTITY)) < 1e-6);
 
-    let labels: Vec<GrayImage> = m
-        .frames
-        .iter()
-        .map(|f| b.read_label(&f.views[0].label).expect("label"))
+    let labels: Vec<GrayImage> = (0..m.frames.len())
+        .map(|f| b.read_view_label(f, 0).expect("label"))
         .collect();
     let score = road_score(m, &labels);
     eprintln!("road ahead on road pixels in {score:.2} of frames");
@@ -217,6 +215,8 @@ fn kitti_camera_2_velodyne_times_and_frame_range() {
     let done = kitti::import(&opts, &mut |_, _, _| {}).expect("import");
     assert!(done.warnings.iter().any(|w| w.contains("no labels")));
     let m = &done.manifest;
+    // Without --labels: a drive without masks, no class table.
+    assert!(!m.labelled() && m.semantic_classes.is_empty());
     assert_eq!(m.frames.len(), 2);
     assert_eq!(m.frames[0].timestamp, 0.11);
     assert_eq!(m.frames[1].timestamp, 0.2);
@@ -582,8 +582,9 @@ fn nuscenes_fixture_poses_calibrations_lidar_and_labels_come_out_exactly() {
     // Labels: Vistas ids remapped (13 road, 7 lane marking, 55 movable, 27 other).
     for f in &m.frames {
         for v in &f.views {
-            let l = b.read_label(&v.label).unwrap();
-            assert_eq!(l.get_pixel(0, 5).0[0], ids::ROAD, "{}", v.label);
+            let path = v.label.as_deref().expect("labelled");
+            let l = b.read_label(path).unwrap();
+            assert_eq!(l.get_pixel(0, 5).0[0], ids::ROAD, "{path}");
             assert_eq!(l.get_pixel(4, 5).0[0], ids::LANE_MARKING);
             assert_eq!(l.get_pixel(13, 8).0[0], ids::MOVABLE);
             assert_eq!(l.get_pixel(3, 0).0[0], ids::OTHER);
@@ -610,6 +611,7 @@ fn nuscenes_sweeps_add_frames_between_keyframes() {
     let done = nuscenes::import(&opts, &mut |_, _, _| {}).expect("import");
     let m = &done.manifest;
     assert!(done.warnings.iter().any(|w| w.contains("no labels")));
+    assert!(!m.labelled());
     assert_eq!(m.frames.len(), 4);
     let sweep = &m.frames[1];
     assert!((sweep.timestamp - 0.25).abs() < 1e-9);

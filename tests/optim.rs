@@ -15,12 +15,17 @@ use rogs::optim::check::{compare_pose_grad, compare_step};
 fn gpu_step_matches_the_oracles() {
     use rogs::optim::AdamScope;
     for mode in [AdamScope::Selective, AdamScope::Dense] {
-        for (window, margin, overflows) in
-            [(None, None, 0), (Some(3), None, 0), (None, Some(0.4), 1)]
-        {
+        // The last case weighs the RGB term robustly (a drive without labels' loss).
+        for (window, margin, overflows, robust_c) in [
+            (None, None, 0, 0.0),
+            (Some(3), None, 0, 0.0),
+            (None, Some(0.4), 1, 0.0),
+            (None, None, 0, 0.2),
+        ] {
             let ctx = GpuContext::new_blocking()
                 .unwrap_or_else(|e| panic!("GPU tests need an adapter: {e}"));
-            let d = pollster::block_on(compare_step(ctx, mode, window, margin)).expect("gpu step");
+            let d = pollster::block_on(compare_step(ctx, mode, window, margin, robust_c))
+                .expect("gpu step");
             assert_eq!(d.pair_overflows, [0, overflows], "{d:#?}");
             assert_eq!(d.decayed > 0, mode != AdamScope::Dense, "{d:#?}");
             check_step(d);

@@ -170,7 +170,7 @@ fn label_edges_align_with_colour_edges() {
         let rgb = image::load_from_memory(find(&f.views[0].image))
             .unwrap()
             .to_rgb8();
-        let lab = image::load_from_memory(find(&f.views[0].label))
+        let lab = image::load_from_memory(find(f.views[0].label.as_deref().expect("labelled")))
             .unwrap()
             .to_luma8();
         let lum =

@@ -110,7 +110,7 @@ async fn optimisation_step_matches_the_oracles_in_the_browser() {
             Ok(c) => c,
             Err(e) => panic!("WebGPU adapter required: {e}"),
         };
-        let d = rogs::optim::check::compare_step(ctx, mode, Some(3), Some(0.4))
+        let d = rogs::optim::check::compare_step(ctx, mode, Some(3), Some(0.4), 0.2)
             .await
             .expect("gpu step");
         assert_eq!(d.pair_overflows, [0, 1]);

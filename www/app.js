@@ -110,6 +110,12 @@ function showSummary(s, source) {
     li.append(sw, `${c.id} ${c.name} (${c.role})`);
     ul.append(li);
   }
+  if (!s.labelled) {
+    const li = document.createElement('li');
+    li.id = 'no-labels';
+    li.textContent = 'No labels: a drive without masks. The road plane below each camera\'s horizon is supervised and the map has no semantic layer.';
+    ul.append(li);
+  }
   $('summary').hidden = false;
 }
 
@@ -175,7 +181,8 @@ function accept(r, drive, add) {
       $('set-half-width').value = String(r.summary.corridor_half_width_m || 4);
     }
     showDrives();
-    offerOptimisation(drives, r.summary.classes);
+    // A drive without labels' map has no classes to show (its table, if any, is the truth's).
+    offerOptimisation(drives, r.summary.labelled ? r.summary.classes : []);
     document.body.dataset.drives = String(drives.length);
     document.body.dataset.lazy = String(drives.some((d) => d.lazy));
     const how = drive.lazy ? ` It is read lazily: ${(drive.lazy.size / 1048576).toFixed(1)} MiB on disk, a tile's files at a time in memory.` : '';

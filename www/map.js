@@ -289,7 +289,8 @@ function showLegend(report, rec) {
   if (geo.elevation_min_m !== undefined) {
     elev.innerHTML = ` · elevation <span class="ramp"></span> ${geo.elevation_min_m.toFixed(2)} – ${geo.elevation_max_m.toFixed(2)} m · error 0 – 10 cm`;
   }
-  el.append('classes: ', sem, elev);
+  if (classes.length) el.append('classes: ', sem);
+  el.append(elev);
 }
 
 async function showCameraView() {

@@ -29,6 +29,7 @@ pub fn front_camera() -> Camera {
             [0.0, -1.0, 0.0, 1.5],
             [0.0, 0.0, 0.0, 1.0],
         ],
+        mask: None,
     }
 }
 
@@ -108,7 +109,7 @@ pub fn tiny() -> (Manifest, Vec<BundleFile>) {
             views: vec![View {
                 camera: "front".into(),
                 image,
-                label,
+                label: Some(label),
                 vehicle_to_world: None,
             }],
             lidar: Some(lidar),

@@ -25,6 +25,9 @@ pub struct Manifest {
     /// (0 when the vehicle frame sits on the ground, as nuScenes' ego frame does).
     #[serde(default)]
     pub vehicle_height_m: f64,
+    /// The classes of the label images. May be empty when no view has a label (a
+    /// drive without masks); then it only describes the truth's `class_ids`.
+    #[serde(default)]
     pub semantic_classes: Vec<SemanticClass>,
     pub cameras: Vec<Camera>,
     pub frames: Vec<Frame>,
@@ -70,6 +73,20 @@ pub struct SemanticClass {
     pub role: ClassRole,
 }
 
+/// The label value of the supervised road plane in a drive without labels (0 is
+/// outside it: above the horizon, beyond `SURFACE_RANGE_M`, the vehicle's body).
+pub const SURFACE_ID: u8 = 1;
+
+/// The one class of a map trained without labels.
+pub fn surface_class() -> SemanticClass {
+    SemanticClass {
+        id: SURFACE_ID,
+        name: "surface".into(),
+        color: [128, 128, 128],
+        role: ClassRole::Road,
+    }
+}
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Camera {
     pub name: String,
@@ -81,6 +98,11 @@ pub struct Camera {
     pub cy: f64,
     /// Camera-to-vehicle transform. Camera axes: x right, y down, z forward.
     pub camera_to_vehicle: Mat4Rows,
+    /// Optional 8-bit PNG of the camera's size, non-zero where the vehicle's own body
+    /// (bonnet, mirrors) covers the image: never supervised. Used by drives without
+    /// labels; with labels, label the body with an ignore class instead.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mask: Option<String>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -111,8 +133,11 @@ pub struct View {
     pub camera: String,
     /// RGB image (PNG or JPEG), `width × height` of its camera, undistorted.
     pub image: String,
-    /// 8-bit PNG of class ids, same size as the image.
-    pub label: String,
+    /// 8-bit PNG of class ids, same size as the image. Absent in a drive without
+    /// masks (then no view has one): the road plane below the horizon is supervised
+    /// instead and the map has no semantic layer (docs/BUNDLE.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub label: Option<String>,
     /// This view's own vehicle-to-world pose, when its camera fired at another time
     /// than the frame's pose was taken (nuScenes cameras fire along the LiDAR sweep,
     /// up to ~50 ms apart). Absent: the frame's `vehicle_to_world`.
@@ -182,10 +207,17 @@ impl Manifest {
         for (fi, f) in self.frames.iter().enumerate() {
             for (vi, v) in f.views.iter().enumerate() {
                 out.push((format!("frames[{fi}].views[{vi}].image"), v.image.as_str()));
-                out.push((format!("frames[{fi}].views[{vi}].label"), v.label.as_str()));
+                if let Some(l) = &v.label {
+                    out.push((format!("frames[{fi}].views[{vi}].label"), l.as_str()));
+                }
             }
             if let Some(l) = &f.lidar {
                 out.push((format!("frames[{fi}].lidar"), l.as_str()));
+            }
+        }
+        for (ci, c) in self.cameras.iter().enumerate() {
+            if let Some(mask) = &c.mask {
+                out.push((format!("cameras[{ci}].mask"), mask.as_str()));
             }
         }
         if let Some(gt) = &self.ground_truth {
@@ -195,6 +227,24 @@ impl Manifest {
             out.push(("ground_truth.valid".into(), gt.valid.as_str()));
         }
         out
+    }
+
+    /// Whether the views carry label images (all of them do, or none).
+    pub fn labelled(&self) -> bool {
+        self.frames
+            .iter()
+            .flat_map(|f| &f.views)
+            .any(|v| v.label.is_some())
+    }
+
+    /// The classes the map is trained with: the label images' table, or for a drive
+    /// without labels the one class `SURFACE` (the road plane below the horizon).
+    pub fn classes(&self) -> std::borrow::Cow<'_, [SemanticClass]> {
+        if self.labelled() {
+            std::borrow::Cow::Borrowed(&self.semantic_classes)
+        } else {
+            std::borrow::Cow::Owned(vec![surface_class()])
+        }
     }
 
     pub fn camera(&self, name: &str) -> Option<&Camera> {

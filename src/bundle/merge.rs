@@ -194,6 +194,18 @@ impl Bundle {
         let mut limits = bundles[0].limits;
         for (k, b) in bundles.into_iter().enumerate() {
             let bm = &b.manifest;
+            if bm.labelled() != first.labelled() {
+                return Err(invalid(
+                    format!("{}: frames[].views[].label", name(k)),
+                    format!(
+                        "{} labels and {} {}; drives of one map are all labelled or all \
+                         without labels (rogs segment can label a drive)",
+                        if bm.labelled() { "has" } else { "has no" },
+                        name(0),
+                        if first.labelled() { "has" } else { "has none" },
+                    ),
+                ));
+            }
             if bm.semantic_classes != first.semantic_classes {
                 return Err(invalid(
                     format!("{}: semantic_classes", name(k)),
@@ -235,6 +247,7 @@ impl Bundle {
             for c in &bm.cameras {
                 let mut c = c.clone();
                 c.name = rename(&c.name);
+                c.mask = c.mask.map(|p| format!("{prefix}{p}"));
                 m.cameras.push(c);
             }
             let start = m.frames.len();
@@ -243,7 +256,7 @@ impl Bundle {
                 for v in &mut f.views {
                     v.camera = rename(&v.camera);
                     v.image = format!("{prefix}{}", v.image);
-                    v.label = format!("{prefix}{}", v.label);
+                    v.label = v.label.as_ref().map(|l| format!("{prefix}{l}"));
                 }
                 f.lidar = f.lidar.map(|l| format!("{prefix}{l}"));
                 m.frames.push(f);

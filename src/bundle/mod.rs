@@ -11,6 +11,7 @@ mod manifest;
 mod merge;
 mod source;
 mod summary;
+pub mod surface;
 pub mod transform;
 mod unknown;
 mod validate;
@@ -174,10 +175,39 @@ impl Bundle {
         Ok(b)
     }
 
-    /// The files of view `view` of frame `frame` (image, label).
-    pub fn view_files(&self, frame: usize, view: usize) -> [&str; 2] {
+    /// The files of view `view` of frame `frame`: its image, its label, and its
+    /// camera's body mask when it has them.
+    pub fn view_files(&self, frame: usize, view: usize) -> Vec<&str> {
         let v = &self.manifest.frames[frame].views[view];
-        [v.image.as_str(), v.label.as_str()]
+        let mask = self
+            .manifest
+            .camera(&v.camera)
+            .and_then(|c| c.mask.as_deref());
+        [Some(v.image.as_str()), v.label.as_deref(), mask]
+            .into_iter()
+            .flatten()
+            .collect()
+    }
+
+    /// The label of view `view` of frame `frame`: its label image, or in a drive
+    /// without labels the road plane its camera sees (`surface::surface_label`).
+    pub fn read_view_label(&self, frame: usize, view: usize) -> Result<image::GrayImage, Problem> {
+        let v = &self.manifest.frames[frame].views[view];
+        if let Some(l) = &v.label {
+            return self.read_label(l);
+        }
+        let cam = self
+            .manifest
+            .camera(&v.camera)
+            .ok_or_else(|| Problem::ManifestField {
+                field: format!("frames[{frame}].views[{view}].camera"),
+                what: format!("no camera named {:?}", v.camera),
+            })?;
+        let body = match &cam.mask {
+            Some(p) => Some(decode_label(p, &self.read(p)?, &self.limits)?),
+            None => None,
+        };
+        Ok(surface::surface_label(&self.manifest, cam, body.as_ref()))
     }
 
     /// Where the files come from.

@@ -13,6 +13,8 @@ pub struct Summary {
     pub duration_s: f64,
     pub trajectory_length_m: f64,
     pub classes: Vec<ClassSummary>,
+    /// Whether the views carry label images (false: a drive without masks).
+    pub labelled: bool,
     /// Total LiDAR points over all sweeps (0 without LiDAR).
     pub lidar_points: u64,
     pub lidar_sweeps: usize,
@@ -92,6 +94,7 @@ impl Summary {
                     role: c.role,
                 })
                 .collect(),
+            labelled: m.labelled(),
             lidar_points,
             lidar_sweeps: sweeps.len(),
             ground_truth: m.ground_truth.as_ref().map(|g| GroundTruthSummary {
@@ -133,6 +136,10 @@ impl Summary {
                 ClassRole::Ignore => "ignore",
             };
             s += &format!("  {:>3} {:<16} {role}\n", c.id, c.name);
+        }
+        if !self.labelled {
+            s += "labels      none: a drive without masks (the road plane below each camera's \
+                  horizon is supervised; the map has no semantic layer)\n";
         }
         s += &format!(
             "lidar       {} points in {} sweeps\n",

@@ -122,8 +122,11 @@ pub fn validate_views(
             if only(&view.image) {
                 v.image_size(&view.image, &cam.name, cam.width, cam.height);
             }
-            if only(&view.label) {
-                v.label(&view.label, &cam.name, cam.width, cam.height);
+            if let Some(label) = view.label.as_deref().filter(|l| only(l)) {
+                v.label(label, &cam.name, cam.width, cam.height);
+            }
+            if let Some(mask) = cam.mask.as_deref().filter(|p| only(p)) {
+                v.gray_of_size(mask, &cam.name, cam.width, cam.height);
             }
         }
     }
@@ -181,6 +184,27 @@ impl<'a> Validator<'a> {
             });
         }
         self.classes(m);
+        if m.labelled() {
+            let missing: Vec<String> = m
+                .frames
+                .iter()
+                .enumerate()
+                .flat_map(|(fi, f)| f.views.iter().enumerate().map(move |(vi, v)| (fi, vi, v)))
+                .filter(|(_, _, v)| v.label.is_none())
+                .map(|(fi, vi, _)| format!("frames[{fi}].views[{vi}].label"))
+                .collect();
+            if let Some(first) = missing.first() {
+                self.invalid(
+                    first.clone(),
+                    format!(
+                        "missing ({} views have no label) while other views have one; give \
+                         every view a label, or none for a drive without masks (rogs segment \
+                         can label a drive)",
+                        missing.len()
+                    ),
+                );
+            }
+        }
         let mut names = HashSet::new();
         if m.cameras.is_empty() {
             self.invalid("cameras", "no camera; expected at least one");
@@ -289,7 +313,8 @@ impl<'a> Validator<'a> {
 
     fn classes(&mut self, m: &Manifest) {
         let mut names = HashSet::new();
-        if m.semantic_classes.is_empty() {
+        // A drive without labels needs no class table (one may describe its truth).
+        if m.semantic_classes.is_empty() && m.labelled() {
             self.invalid(
                 "semantic_classes",
                 "no class; expected at least one class with role \"road\"",
@@ -453,11 +478,11 @@ impl<'a> Validator<'a> {
                     if present.contains(v.image.as_str()) {
                         self.image_size(&v.image, &cam.name, cam.width, cam.height);
                     }
-                    if present.contains(v.label.as_str()) {
-                        self.label(&v.label, &cam.name, cam.width, cam.height);
+                    if let Some(label) = v.label.as_deref().filter(|l| present.contains(l)) {
+                        self.label(label, &cam.name, cam.width, cam.height);
                     }
                 }
-                done += 2;
+                done += 1 + v.label.is_some() as usize;
                 progress(done, total);
             }
             if let (Some(path), Some(sensor)) = (&f.lidar, &m.lidar) {
@@ -474,6 +499,13 @@ impl<'a> Validator<'a> {
                     }
                 }
                 done += 1;
+            }
+        }
+        if self.content {
+            for c in &m.cameras {
+                if let Some(mask) = c.mask.as_deref().filter(|p| present.contains(p)) {
+                    self.gray_of_size(mask, &c.name, c.width, c.height);
+                }
             }
         }
         if let Some(gt) = &m.ground_truth {
@@ -542,17 +574,30 @@ impl<'a> Validator<'a> {
         }
     }
 
-    fn label(&mut self, path: &str, camera: &str, w: u32, h: u32) {
+    /// A grey PNG of the camera's size, decoded; `None` once its problem is recorded.
+    fn gray_of_size(
+        &mut self,
+        path: &str,
+        camera: &str,
+        w: u32,
+        h: u32,
+    ) -> Option<image::GrayImage> {
         let bytes = match self.source.read(path, &self.limits) {
             Ok(b) => b,
-            Err(p) => return self.problems.push(p),
+            Err(p) => {
+                self.problems.push(p);
+                return None;
+            }
         };
         let img = match decode_label(path, &bytes, &self.limits) {
             Ok(i) => i,
-            Err(p) => return self.problems.push(p),
+            Err(p) => {
+                self.problems.push(p);
+                return None;
+            }
         };
         if img.dimensions() != (w, h) {
-            return self.problems.push(Problem::ImageSize {
+            self.problems.push(Problem::ImageSize {
                 path: path.into(),
                 camera: camera.into(),
                 expected_w: w,
@@ -560,7 +605,15 @@ impl<'a> Validator<'a> {
                 found_w: img.width(),
                 found_h: img.height(),
             });
+            return None;
         }
+        Some(img)
+    }
+
+    fn label(&mut self, path: &str, camera: &str, w: u32, h: u32) {
+        let Some(img) = self.gray_of_size(path, camera, w, h) else {
+            return;
+        };
         let mut first = None;
         let mut bad = 0u64;
         let mut road = 0u64;

@@ -117,6 +117,12 @@ pub struct SettingsArgs {
     /// the map).
     #[arg(long, value_enum, default_value = "dense")]
     adam: AdamMode,
+    /// Down-weight pixels whose colour residual is large (cars, people, moving
+    /// shadows in a drive without labels): weight 1 / (1 + (r/C)²) for a mean
+    /// residual r on a 0–1 scale, e.g. 0.1; 0 (the default) turns it off. It pays
+    /// where traffic moves; on parked cars it costs 0.2–0.3 dB (docs/QUALITY.md).
+    #[arg(long, value_name = "C")]
+    robust_c: Option<f32>,
     /// Leave every K-th frame out of training and report road PSNR on those views,
     /// for the result and for the IPM baseline.
     #[arg(long)]
@@ -241,6 +247,7 @@ impl SettingsArgs {
             map_memory_mib: a.map_memory_mib,
             pose_rig: Some(a.pose_rig),
             adam: Some(a.adam.name().into()),
+            robust_c: a.robust_c,
         }
     }
 }

@@ -76,6 +76,10 @@ pub struct Args {
     /// but aliased).
     #[arg(long)]
     rays_per_axis: Option<u32>,
+    /// Leave the label images out: a drive without masks (the class table stays, to
+    /// describe the truth), to measure what masks are worth.
+    #[arg(long)]
+    no_labels: bool,
     /// Also write a PNG contact sheet of some frames (images left, labels right).
     #[arg(long)]
     contact_sheet: Option<PathBuf>,
@@ -97,6 +101,7 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
         return Err("--drive is for --preset revisit (other presets have one drive)".into());
     }
     cfg.view_poses = !a.no_view_poses;
+    cfg.labels = !a.no_labels;
     if let Some(m) = a.length_m {
         if !(m.is_finite() && m > 0.0) {
             return Err(format!(
@@ -198,9 +203,13 @@ pub fn contact_sheet(
             let rgb = image::load_from_memory(find(&v.image).ok_or("image missing")?)
                 .map_err(|e| e.to_string())?
                 .to_rgb8();
-            let lab = image::load_from_memory(find(&v.label).ok_or("label missing")?)
-                .map_err(|e| e.to_string())?
-                .to_luma8();
+            // A drive without labels shows black beside its images.
+            let lab = match v.label.as_deref() {
+                Some(l) => image::load_from_memory(find(l).ok_or("label missing")?)
+                    .map_err(|e| e.to_string())?
+                    .to_luma8(),
+                None => image::GrayImage::new(w, h),
+            };
             let (x, y) = (c as u32 * w, r as u32 * h);
             image::imageops::replace(&mut sheet, &rgb, x as i64, y as i64);
             let col = image::RgbImage::from_fn(w, h, |i, j| {

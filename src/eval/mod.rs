@@ -12,8 +12,12 @@ pub use raster::BevRaster;
 
 use crate::bundle::{Bundle, ClassRole, Manifest, Problem};
 
-/// Ids of the classes with role `road`.
+/// Ids of the classes with role `road`: none for a drive without labels, whose map
+/// has no semantic layer to score (its mIoU is null).
 pub fn road_classes(m: &Manifest) -> Vec<u8> {
+    if !m.labelled() {
+        return Vec::new();
+    }
     m.semantic_classes
         .iter()
         .filter(|c| c.role == ClassRole::Road)

@@ -30,11 +30,13 @@ pub fn lidar_cloud_in(b: &Bundle, m: &crate::bundle::Manifest) -> Result<LidarCl
     let Some(sensor) = &m.lidar else {
         return Ok(LidarCloud::default());
     };
+    // Ids outside the table (a drive without labels' 0) are never sampled either.
+    let classes = m.classes();
     let ignore: Vec<bool> = (0..=255u8)
         .map(|id| {
-            m.semantic_classes
+            !classes
                 .iter()
-                .any(|c| c.id == id && c.role == ClassRole::Ignore)
+                .any(|c| c.id == id && c.role == ClassRole::Road)
         })
         .collect();
     let mut cache: HashMap<String, (image::RgbImage, image::GrayImage)> = HashMap::new();
@@ -111,7 +113,7 @@ fn colour_point(
                 }
                 cache.insert(
                     view.image.clone(),
-                    (b.read_rgb(&view.image)?, b.read_label(&view.label)?),
+                    (b.read_rgb(&view.image)?, b.read_view_label(j, vi)?),
                 );
             }
             if let Some((rgb, lab)) = cache.get(&view.image) {

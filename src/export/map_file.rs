@@ -577,23 +577,24 @@ pub fn run_index(
     truth: bool,
     range: (f32, f32),
 ) -> MapIndex {
+    // A drive without labels has no semantic layer and no class values.
     let layers: Vec<&str> = super::LAYERS
         .iter()
         .copied()
-        .filter(|l| *l != "error" || truth)
+        .filter(|l| (*l != "error" || truth) && (*l != "semantic" || m.labelled()))
         .collect();
-    let values: &[&str] = if truth {
-        &["elevation", "class", "confidence", "density", "error"]
-    } else {
-        &["elevation", "class", "confidence", "density"]
-    };
+    let all = ["elevation", "class", "confidence", "density", "error"];
+    let values: Vec<&str> = all
+        .into_iter()
+        .filter(|v| (*v != "error" || truth) && (*v != "class" || m.labelled()))
+        .collect();
     let mut index = new_index(
         &m.name,
         &m.semantic_classes,
         trajectory(m),
         g,
         &layers,
-        values,
+        &values,
     );
     index.elevation_range = Some([range.0, range.1]);
     index

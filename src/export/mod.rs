@@ -137,17 +137,20 @@ pub fn model_files(
             m.semantic_classes.get(k).map_or([0, 0, 0], |c| c.color)
         })
         .collect();
-    vec![
+    let mut out = vec![
         ("surfel_centres.f32".into(), centres),
         (
             "surfels.ply".into(),
             ply::surfels_ply(p, origin, up, None, &m.frame_description()),
         ),
-        (
+    ];
+    if m.labelled() {
+        out.push((
             "surfels_semantic.ply".into(),
             ply::surfels_ply(p, origin, up, Some(&classes), &m.frame_description()),
-        ),
-    ]
+        ));
+    }
+    out
 }
 
 /// The map's files (BEV layers and their geometry); with `model_files` and the report,
@@ -158,13 +161,16 @@ pub fn files(o: &Outcome, m: &Manifest) -> Result<Vec<(String, Vec<u8>)>, String
     let r = &o.raster;
     let mut out = vec![
         ("rgb.png".into(), png(&r.rgb.clone().into())),
-        (
-            "semantic.png".into(),
-            png(&semantic_colours(m, &r.class_ids, &r.valid).into()),
-        ),
-        ("semantic_ids.png".into(), png(&r.class_ids.clone().into())),
         ("valid.png".into(), png(&r.valid.clone().into())),
     ];
+    // A drive without labels has no semantic layer.
+    if m.labelled() {
+        out.push((
+            "semantic.png".into(),
+            png(&semantic_colours(m, &r.class_ids, &r.valid).into()),
+        ));
+        out.push(("semantic_ids.png".into(), png(&r.class_ids.clone().into())));
+    }
     let z = elevation(o);
     let (lo, hi) = range(&z);
     out.push((
@@ -229,7 +235,7 @@ fn geotiffs(o: &Outcome, m: &Manifest, z: &[f32]) -> Result<Vec<(String, Vec<u8>
         .collect();
     let rgba = layer_rgba(o, m, "rgb").unwrap_or_default();
     let z: Vec<f32> = z.iter().map(|v| v + off[2] as f32).collect();
-    Ok(vec![
+    let mut out = vec![
         (
             "elevation.tif".into(),
             geotiff::float_tif("elevation.tif", &z, g, frame)?,
@@ -238,11 +244,14 @@ fn geotiffs(o: &Outcome, m: &Manifest, z: &[f32]) -> Result<Vec<(String, Vec<u8>
             "rgb.tif".into(),
             geotiff::rgba_tif("rgb.tif", &rgba, g, frame)?,
         ),
-        (
+    ];
+    if m.labelled() {
+        out.push((
             "semantic.tif".into(),
             geotiff::ids_tif("semantic.tif", &ids, g, frame)?,
-        ),
-    ])
+        ));
+    }
+    Ok(out)
 }
 
 /// Values through the colour ramp from `lo` to `hi`, as RGBA (transparent where NaN).
@@ -266,7 +275,8 @@ pub const LAYERS: [&str; 6] = [
 ];
 
 /// A layer as RGBA pixels for display (transparent where the map is empty), with the
-/// map's size; `None` for an unknown name or `error` without truth.
+/// map's size; `None` for an unknown name, `error` without truth or `semantic` for
+/// a drive without labels.
 pub fn layer_rgba(o: &Outcome, m: &Manifest, name: &str) -> Option<Vec<u8>> {
     layer_rgba_in(o, m, name, range(&elevation(o)))
 }
@@ -286,7 +296,7 @@ pub fn layer_rgba_in(o: &Outcome, m: &Manifest, name: &str, range: (f32, f32)) -
     let from_values = ramp_rgba;
     match name {
         "rgb" => Some(from_rgb(&r.rgb)),
-        "semantic" => Some(from_rgb(&semantic_colours(m, &r.class_ids, &r.valid))),
+        "semantic" if m.labelled() => Some(from_rgb(&semantic_colours(m, &r.class_ids, &r.valid))),
         "elevation" => Some(from_values(&elevation(o), range.0, range.1)),
         "confidence" => Some(from_rgb(
             &image::DynamicImage::from(grey(&o.confidence, w, h)).to_rgb8(),

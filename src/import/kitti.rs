@@ -8,9 +8,8 @@
 //! bundle holds), so importing is I/O bound.
 
 use super::{
-    all_road_classes, check_label, class, header_dims, inverse, known_ids, mul, read_classes,
-    read_file, resolve, rigid, zero_label, ImportError, Imported, Output, ProgressFn,
-    NO_LABELS_WARNING,
+    check_label, class, header_dims, inverse, known_ids, mul, read_classes, read_file, resolve,
+    rigid, ImportError, Imported, Output, ProgressFn, NO_LABELS_WARNING,
 };
 use crate::bundle::{
     Camera, ClassRole, Frame, LidarSensor, Manifest, Mat4Rows, SemanticClass, View, FORMAT, VERSION,
@@ -343,16 +342,10 @@ pub fn import(opts: &KittiOptions, progress: ProgressFn) -> Result<Imported, Imp
                 check_label(&src, &bytes, size, &known)?;
                 let label = format!("labels/{cam_name}/{file}");
                 out.add(&label, &bytes)?;
-                label
+                Some(label)
             }
-            None => {
-                // One all-road mask shared by every view: it is the same image each time.
-                let label = format!("labels/{cam_name}/all_road.png");
-                if !out.has(&label) {
-                    out.add(&label, &zero_label(size))?;
-                }
-                label
-            }
+            // A drive without masks (docs/BUNDLE.md).
+            None => None,
         };
         let lidar_path = if opts.velodyne {
             let src = seq.join("velodyne").join(format!("{i:06}.bin"));
@@ -404,6 +397,7 @@ pub fn import(opts: &KittiOptions, progress: ProgressFn) -> Result<Imported, Imp
             cx,
             cy,
             camera_to_vehicle: camera_to_vehicle(&p, opts.camera_height),
+            mask: None,
         }],
         frames,
         lidar,
@@ -420,8 +414,8 @@ pub fn import(opts: &KittiOptions, progress: ProgressFn) -> Result<Imported, Imp
     out.finish(manifest, warnings, progress)
 }
 
-/// The class table and label folder from `--labels`/`--classes`, or the all-road
-/// fallback (with its warning) when neither is given.
+/// The class table and label folder from `--labels`/`--classes`, or none (a drive
+/// without masks, with its warning) when neither is given.
 fn class_table(
     opts: &KittiOptions,
     warnings: &mut Vec<String>,
@@ -449,7 +443,7 @@ fn class_table(
         (None, Some(_)) => Err("--classes needs --labels (the folder of label PNGs)".into()),
         (None, None) => {
             warnings.push(NO_LABELS_WARNING.to_string());
-            Ok((all_road_classes(), None))
+            Ok((Vec::new(), None))
         }
     }
 }

@@ -9,7 +9,6 @@
 pub mod kitti;
 pub mod nuscenes;
 
-use crate::bundle::example::png_gray;
 use crate::bundle::{
     decode_label, image_dims, Bundle, BundleErrors, ClassRole, Limits, Manifest, Mat4Rows,
     SemanticClass, ZipBundleWriter,
@@ -63,11 +62,6 @@ pub struct Imported {
 /// `(stage, done, total)`, called as frames are written and then validated.
 pub type ProgressFn<'a> = &'a mut dyn FnMut(&str, usize, usize);
 
-/// The table used when no labels are given: every pixel is road.
-pub fn all_road_classes() -> Vec<SemanticClass> {
-    vec![class(0, "road", [128, 64, 128], ClassRole::Road)]
-}
-
 pub(crate) fn class(id: u8, name: &str, color: [u8; 3], role: ClassRole) -> SemanticClass {
     SemanticClass {
         id,
@@ -77,9 +71,10 @@ pub(crate) fn class(id: u8, name: &str, color: [u8; 3], role: ClassRole) -> Sema
     }
 }
 
-pub(crate) const NO_LABELS_WARNING: &str = "no labels given: every pixel is labelled road \
-(class 0), so the optimiser is supervised on sky, cars and everything else as if it were \
-road. Give segmentation masks with --labels for a usable map.";
+pub(crate) const NO_LABELS_WARNING: &str = "no labels given: a drive without masks. The road \
+plane below each camera's horizon is supervised, cars and people on it are down-weighted by \
+the robust loss, and the map has no semantic layer (docs/BUNDLE.md). Give segmentation masks \
+with --labels for a semantic layer.";
 
 /// Reads a class table: a JSON array of bundle `SemanticClass` objects.
 pub fn read_classes(path: &Path) -> Result<Vec<SemanticClass>, String> {
@@ -163,11 +158,6 @@ pub(crate) fn known_ids(classes: &[SemanticClass]) -> [bool; 256] {
     known
 }
 
-/// An all-zero label image (every pixel class 0).
-pub(crate) fn zero_label(size: (u32, u32)) -> Vec<u8> {
-    png_gray(&image::GrayImage::new(size.0, size.1))
-}
-
 /// The bundle being written: a `.partial` file beside the output, renamed into place
 /// once the validator accepts it. Dropped before `finish` (an input error midway), it
 /// removes the partial file; an invalid result is kept for inspection.
@@ -203,10 +193,6 @@ impl Output {
                 .map_err(|e| format!("{}: {e}", self.partial.display()))?;
         }
         Ok(())
-    }
-
-    pub fn has(&self, name: &str) -> bool {
-        self.written.contains(name)
     }
 
     /// Writes the manifest, validates the whole file and moves it into place.

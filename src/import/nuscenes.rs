@@ -13,8 +13,8 @@ mod labels;
 mod tables;
 
 use super::{
-    all_road_classes, apply, header_dims, inverse, mul, read_file, resolve, rigid, zero_label,
-    ImportError, Imported, Output, ProgressFn, NO_LABELS_WARNING,
+    apply, header_dims, inverse, mul, read_file, resolve, rigid, ImportError, Imported, Output,
+    ProgressFn, NO_LABELS_WARNING,
 };
 use crate::bundle::{
     Camera, Frame, LidarSensor, Manifest, Mat4Rows, View, WorldFrame, FORMAT, VERSION,
@@ -347,7 +347,7 @@ pub fn import(opts: &NuScenesOptions, progress: ProgressFn) -> Result<Imported, 
         }
         None => {
             warnings.push(NO_LABELS_WARNING.to_string());
-            (all_road_classes(), None, [0; 256])
+            (Vec::new(), None, [0; 256])
         }
     };
 
@@ -490,6 +490,7 @@ fn camera(scene: &SceneData, opts: &NuScenesOptions, name: &str) -> Result<Camer
         cy: k[1][2],
         camera_to_vehicle: transform(cal.rotation, cal.translation)
             .map_err(|m| format!("calibrated_sensor {}: {m}", cal.token))?,
+        mask: None,
     })
 }
 
@@ -569,6 +570,7 @@ fn write_view(
     let name = file_name(&rec.filename);
     let image = format!("images/{}/{name}", cam.name);
     out.add(&image, &bytes)?;
+    // Without labels: a drive without masks (docs/BUNDLE.md).
     let label = match labels {
         Some(dir) => {
             let path = find_label(dir, &cam.name, &rec.filename)?;
@@ -578,15 +580,9 @@ fn write_view(
                 .unwrap_or(name);
             let label = format!("labels/{}/{stem}.png", cam.name);
             out.add(&label, &remap_label(&path, dims, lut)?)?;
-            label
+            Some(label)
         }
-        None => {
-            let label = format!("labels/{}/all_road.png", cam.name);
-            if !out.has(&label) {
-                out.add(&label, &zero_label(dims))?;
-            }
-            label
-        }
+        None => None,
     };
     Ok(View {
         camera: cam.name.clone(),

@@ -157,11 +157,13 @@ where
     F: FnMut(usize, &ViewImages, &Projection),
 {
     let m = &b.manifest;
+    // Ids outside the table (a drive without labels' 0) are never sampled either.
+    let classes = m.classes();
     let ignore: Vec<bool> = (0..=255u8)
         .map(|id| {
-            m.semantic_classes
+            !classes
                 .iter()
-                .any(|c| c.id == id && c.role == ClassRole::Ignore)
+                .any(|c| c.id == id && c.role == ClassRole::Road)
         })
         .collect();
     let mut pending: Vec<(usize, usize)> = (0..candidates.len())
@@ -185,7 +187,7 @@ where
                 Some(b.read_rgb(&view.image).and_then(|rgb| {
                     Ok(ViewImages {
                         rgb,
-                        label: b.read_label(&view.label)?,
+                        label: b.read_view_label(cv.frame, cv.view)?,
                     })
                 }))
             });

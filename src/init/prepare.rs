@@ -111,7 +111,7 @@ pub fn lidar_world_of(
 pub fn prepare(b: &Bundle, cfg: &PrepareConfig) -> Result<Prepared, PrepareError> {
     let m = &b.manifest;
     // One logit per class of the table (dense index, not the class id).
-    let classes = m.semantic_classes.len().max(1);
+    let classes = m.classes().len().max(1);
     let bps = Surfels::bytes_per_surfel(classes);
     let t0 = Instant::now();
     let planes = PosePlanes::from_manifest(m);

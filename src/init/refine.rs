@@ -117,10 +117,10 @@ pub fn refine(
         let k = blocks.binary_search(&block_of(cells[i])).unwrap_or(0);
         cams.candidates_in(&block_frames[k], centres[i], 2)
     });
+    let classes = b.manifest.classes();
     let road: Vec<bool> = (0..=255u8)
         .map(|id| {
-            b.manifest
-                .semantic_classes
+            classes
                 .iter()
                 .any(|c| c.id == id && c.role == ClassRole::Road)
         })

@@ -34,10 +34,16 @@ pub fn photometric(
         if cls == MASKED || img.alpha[i] < cfg.min_alpha {
             continue;
         }
-        let k_rgb = cfg.rgb * inv_n / 3.0;
+        let d: [f32; 3] =
+            std::array::from_fn(|c| img.rgb[3 * i + c] - ((t >> (8 * c)) & 255) as f32 / 255.0);
+        let mut wr = 1.0;
+        if cfg.robust_c > 0.0 {
+            let r = (d[0].abs() + d[1].abs() + d[2].abs()) / 3.0 / cfg.robust_c;
+            wr = 1.0 / (1.0 + r * r);
+        }
+        let k_rgb = cfg.rgb * inv_n / 3.0 * wr;
         for c in 0..3 {
-            let tc = ((t >> (8 * c)) & 255) as f32 / 255.0;
-            let d = img.rgb[3 * i + c] - tc;
+            let d = d[c];
             loss.rgb += (k_rgb * d.abs()) as f64;
             // WGSL's sign(0) is 0, like f32::signum only away from zero.
             g.rgb[3 * i + c] = if d == 0.0 { 0.0 } else { k_rgb * d.signum() };
@@ -55,4 +61,37 @@ pub fn photometric(
         }
     }
     (loss, g)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two pixels against a grey target: one off by 0.1 in every channel, one by 0.4
+    /// (a car on the road). With c = 0.1 their weights are 1/2 and 1/17.
+    #[test]
+    fn robust_weight_follows_the_cauchy_curve() {
+        let grey = 128u32 | 128 << 8 | 128 << 16;
+        let t = 128.0 / 255.0;
+        let img = Image {
+            width: 2,
+            height: 1,
+            rgb: vec![t + 0.1, t + 0.1, t + 0.1, t + 0.4, t + 0.4, t + 0.4],
+            logits: vec![0.0; 2],
+            depth: vec![0.0; 2],
+            alpha: vec![1.0; 2],
+            channels: 1,
+        };
+        let target = [grey, grey];
+        let plain = photometric(&img, &target, &LossConfig::default(), 0.5).1;
+        let cfg = LossConfig {
+            robust_c: 0.1,
+            ..LossConfig::default()
+        };
+        let robust = photometric(&img, &target, &cfg, 0.5).1;
+        let near = robust.rgb[0] / plain.rgb[0];
+        let far = robust.rgb[3] / plain.rgb[3];
+        assert!((near - 0.5).abs() < 1e-3, "{near}");
+        assert!((far - 1.0 / 17.0).abs() < 1e-3, "{far}");
+    }
 }

@@ -15,7 +15,7 @@ pub const MASKED: u32 = 255;
 /// Class id → dense channel index (the logit order: the manifest's class table).
 pub fn channel_of(m: &Manifest) -> [Option<u8>; 256] {
     let mut out = [None; 256];
-    for (k, c) in m.semantic_classes.iter().enumerate() {
+    for (k, c) in m.classes().iter().enumerate() {
         out[c.id as usize] = Some(k as u8);
     }
     out
@@ -53,12 +53,8 @@ fn morph(mask: &[bool], w: usize, h: usize, side: u32, erode: bool) -> Vec<bool>
 /// The loss mask of a label image: opened road minus dilated ignore classes.
 pub fn loss_mask(m: &Manifest, label: &GrayImage, open_px: u32, dilate_px: u32) -> Vec<bool> {
     let (w, h) = (label.width() as usize, label.height() as usize);
-    let role = |id: u8| {
-        m.semantic_classes
-            .iter()
-            .find(|c| c.id == id)
-            .map(|c| c.role)
-    };
+    let classes = m.classes();
+    let role = |id: u8| classes.iter().find(|c| c.id == id).map(|c| c.role);
     let mut road_of = [false; 256];
     let mut ignore_of = [false; 256];
     for id in 0..=255u8 {

@@ -94,12 +94,14 @@ fn reg_data(n: usize, z: &[f32], rng: &mut Rng) -> RegData {
 /// `moment_window` limits the blocks of 256 surfels whose moments one `adam` pass
 /// binds (`None`: as many as fit, one pass here); `pair_margin` (`None`: the default)
 /// sizes step 2's pair buffers from step 1's count (below 1 step 2 overflows them and
-/// runs again).
+/// runs again); `robust_c` weighs the RGB term robustly (`LossConfig::robust_c`, 0:
+/// plain L1).
 pub async fn compare_step(
     ctx: GpuContext,
     mode: super::AdamScope,
     moment_window: Option<usize>,
     pair_margin: Option<f64>,
+    robust_c: f32,
 ) -> Result<StepDifferences, GpuError> {
     let ch = 4;
     let (p0, mut cam) = test_scene(ch);
@@ -117,6 +119,7 @@ pub async fn compare_step(
     let selective = mode == super::AdamScope::Selective;
     cfg.pair_margin = pair_margin.unwrap_or(cfg.pair_margin);
     cfg.loss.min_alpha = 0.2;
+    cfg.loss.robust_c = robust_c;
     let npx = (cam.width * cam.height) as usize;
     // Random colours; a tenth of the pixels masked out.
     let target: Vec<u32> = (0..npx)

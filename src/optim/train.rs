@@ -231,7 +231,8 @@ crate::uniform_block! {
         min_alpha: f32,
         /// The pairs the view's buffers hold (more: the step is refused).
         capacity: u32,
-        pad0: u32,
+        /// The robust weighting's scale (0: plain L1).
+        robust_c: f32,
         pad1: u32,
         pad2: u32,
     }
@@ -542,6 +543,7 @@ impl Trainer {
             w_ce: self.cfg.loss.ce,
             min_alpha: self.cfg.loss.min_alpha,
             capacity: f.capacity,
+            robust_c: self.cfg.loss.robust_c,
             ..LossParams::default()
         };
         let lp = uniform(ctx, "loss_params", bytemuck::bytes_of(&lp));

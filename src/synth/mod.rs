@@ -97,6 +97,9 @@ pub struct SynthConfig {
     pub view_poses: bool,
     /// Which drive of a `revisit` scene (1, 2, …); other presets have one.
     pub drive: usize,
+    /// Write the views' label images; false makes a drive without masks (the
+    /// class table stays, for the truth).
+    pub labels: bool,
 }
 
 impl SynthConfig {
@@ -119,6 +122,7 @@ impl SynthConfig {
             camera_stagger_s: 0.0,
             view_poses: true,
             drive: 1,
+            labels: true,
         };
         match preset {
             Preset::Tiny => base,
@@ -364,6 +368,7 @@ pub fn generate(cfg: &SynthConfig, progress: Progress) -> Result<SynthOutput, St
                 cx: cfg.width as f64 / 2.0,
                 cy,
                 camera_to_vehicle: camera_to_vehicle(yaw, pitch, pos),
+                mask: None,
             }
         })
         .collect();
@@ -441,7 +446,7 @@ pub fn generate(cfg: &SynthConfig, progress: Progress) -> Result<SynthOutput, St
             fviews.push(View {
                 camera: cam.name.clone(),
                 image,
-                label,
+                label: cfg.labels.then_some(label),
                 vehicle_to_world: own,
             });
         }
@@ -458,7 +463,9 @@ pub fn generate(cfg: &SynthConfig, progress: Progress) -> Result<SynthOutput, St
     for (i, (rgb, lab)) in images.into_iter().enumerate() {
         let v = &frames[i / cfg.cameras].views[i % cfg.cameras];
         files.push((v.image.clone(), rgb));
-        files.push((v.label.clone(), lab));
+        if let Some(l) = &v.label {
+            files.push((l.clone(), lab));
+        }
     }
     for (k, bytes) in sweeps.into_iter().enumerate() {
         files.push((format!("lidar/{k:06}.bin"), bytes));

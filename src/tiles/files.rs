@@ -27,14 +27,14 @@ pub fn tile_files(b: &Bundle, cfg: &ReconstructConfig, t: &Tile) -> Vec<String> 
             continue;
         }
         for k in 0..frame.views.len() {
-            out.extend(b.view_files(f, k).map(String::from));
+            out.extend(b.view_files(f, k).into_iter().map(String::from));
         }
         if let (true, Some(l)) = (lidar, &frame.lidar) {
             out.insert(l.clone());
         }
     }
     for &(f, k) in &t.views {
-        out.extend(b.view_files(f, k).map(String::from));
+        out.extend(b.view_files(f, k).into_iter().map(String::from));
     }
     out.into_iter().collect()
 }
@@ -46,7 +46,7 @@ fn all_files(b: &Bundle, cfg: &ReconstructConfig) -> Vec<String> {
     let mut out = BTreeSet::new();
     for (f, frame) in m.frames.iter().enumerate() {
         for k in 0..frame.views.len() {
-            out.extend(b.view_files(f, k).map(String::from));
+            out.extend(b.view_files(f, k).into_iter().map(String::from));
         }
         if let (true, Some(l)) = (lidar, &frame.lidar) {
             out.insert(l.clone());

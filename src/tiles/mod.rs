@@ -335,7 +335,7 @@ impl TiledRun {
         let b: &Bundle = b;
         let truth = BevRaster::from_bundle(b)?;
         let min_alpha = cfg.train.loss.min_alpha;
-        let channels = b.manifest.semantic_classes.len().max(1);
+        let channels = b.manifest.classes().len().max(1);
         let epochs = if cfg.baseline_ipm {
             0
         } else {

@@ -304,3 +304,26 @@ test('two drives dropped together make one map', async () => {
   assert.deepEqual(errors, []);
   await page.close();
 });
+
+test('a drive without labels makes a map without a semantic layer', async () => {
+  const { page, errors } = await openPage();
+  await drop(page, 'unlabelled.zip');
+  await page.waitForSelector('#summary:not([hidden])');
+  assert.match(await page.textContent('#no-labels'), /No labels: a drive without masks/);
+  await page.waitForSelector('#optimise:not([hidden])');
+  await page.selectOption('#set-resolution', '0.2');
+  await page.click('#run');
+  await page.waitForSelector('#viewer:not([hidden]) #exports a', { timeout: 170_000 });
+  const names = await page.evaluate(() => [...document.querySelectorAll('#exports a')].map((a) => a.download));
+  assert.ok(names.includes('rgb.png') && names.includes('elevation.tif'), names.join(' '));
+  assert.ok(!names.some((n) => n.startsWith('semantic') || n === 'surfels_semantic.ply'), names.join(' '));
+  assert.equal(await page.locator('[data-layer="semantic"]').count(), 0, 'no semantic layer to show');
+  assert.equal(await page.locator('[data-layer="rgb"]').count(), 1);
+  const miou = await page.evaluate(async () => {
+    const a = [...document.querySelectorAll('#exports a')].find((x) => x.download === 'report.json');
+    return (await (await fetch(a.href)).json()).metrics.miou;
+  });
+  assert.equal(miou, null);
+  assert.deepEqual(errors, []);
+  await page.close();
+});

@@ -48,6 +48,11 @@ if ! .venv/bin/python -c 'import ray' 2>/dev/null; then
   python3 -m venv .venv
   .venv/bin/pip install --quiet --disable-pip-version-check "ray==2.60.0"
 fi
+# onnxruntime is the independent run `rogs segment` is checked against (tests/segment.rs).
+if ! .venv/bin/python -c 'import onnxruntime' 2>/dev/null; then
+  say "installing onnxruntime into .venv (about 20 s, once)"
+  .venv/bin/pip install --quiet --disable-pip-version-check "onnxruntime==1.32.0"
+fi
 if [ ! -d node_modules/playwright-core ] || [ ! -d node_modules/@playcanvas/splat-transform ]; then
   say "installing npm packages"
   npm ci --no-audit --no-fund

@@ -19,6 +19,8 @@ pub mod optim;
 pub mod par;
 pub mod reconstruct;
 pub mod render;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod segment;
 pub mod settings;
 pub mod spatial;
 pub mod synth;

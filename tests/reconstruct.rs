@@ -146,7 +146,10 @@ fn a_drive_without_labels_makes_a_map_without_a_semantic_layer() {
     let (p, pb) = (m.psnr_db.unwrap(), mb.psnr_db.unwrap());
     assert!(p > pb + 1.0 && p > 22.0, "PSNR {p} (IPM {pb})");
     let e = m.elevation_rmse_m.unwrap();
-    assert!(e < 0.03 && e < 0.5 * mb.elevation_rmse_m.unwrap(), "elevation {e} m");
+    assert!(
+        e < 0.03 && e < 0.5 * mb.elevation_rmse_m.unwrap(),
+        "elevation {e} m"
+    );
     assert!(rogs::export::layer_rgba(&o, &b.manifest, "semantic").is_none());
     assert!(rogs::export::layer_rgba(&o, &b.manifest, "rgb").is_some());
     let mut files = rogs::export::files(&o, &b.manifest).expect("exports");

@@ -10,6 +10,7 @@ mod inspect;
 mod jobs;
 pub mod progress;
 mod reconstruct;
+mod segment;
 mod synth;
 
 use clap::{Parser, Subcommand};
@@ -111,6 +112,13 @@ enum Command {
     /// outputs as `rogs reconstruct`: the layers, GeoTIFFs, PLY, map.rogsmap and
     /// report.json. The map equals the single-process tiled run's.
     Merge(jobs::MergeArgs),
+    /// Label every view of a bundle with a road-segmentation network (ONNX).
+    ///
+    /// Runs the model on each image (resized to the model's input, in batches, so
+    /// memory stays flat), maps its outputs to classes with --classes and writes the
+    /// bundle with a label per view and the class map's class table: the bundle a
+    /// labelled drive would be. docs/SEGMENT.md.
+    Segment(segment::Args),
 }
 
 pub fn run() -> ExitCode {
@@ -129,6 +137,7 @@ pub fn run() -> ExitCode {
         },
         Command::Plan(a) => jobs::plan(a),
         Command::Merge(a) => jobs::merge(a),
+        Command::Segment(a) => segment::run(a),
     };
     match result {
         Ok(code) => code,

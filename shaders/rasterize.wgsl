@@ -26,6 +26,13 @@
 //! Their outputs read as empty (alpha 0, no last contributor), so the backward pass
 //! walks nothing for them either. The loss, and so every gradient, is unchanged.
 //!
+//! With `view.average` (the map's view from above, `Compositing::Average`), a pixel
+//! takes the alpha-weighted mean of every surfel it meets instead, scaled by the
+//! coverage 1 − Π(1 − α): coplanar neighbours sorted front to back would let
+//! whichever lies a millimetre higher cover their overlap, shifting the map downhill
+//! and speckling it. Nothing trains through that view, so the backward pass has no
+//! such mode.
+//!
 //! Oracle: src/render/rasterize.rs.
 
 @group(0) @binding(0) var<uniform> view: View;
@@ -54,6 +61,8 @@ struct Pixel {
     c: vec3<f32>,
     depth: f32,
     last_k: u32,
+    // The sum of the weights (`view.average`).
+    wsum: f32,
     // The current surfel: whether it is composited here, and its weight.
     live: bool,
     w: f32,
@@ -88,12 +97,14 @@ fn weigh(p: ptr<function, Pixel>, s: Surfel, k: u32) -> bool {
         return false;
     }
     let t_next = (*p).t * (1.0 - e.alpha);
-    if t_next < MIN_TRANSMITTANCE {
+    let average = view.average != 0u;
+    if t_next < MIN_TRANSMITTANCE && !average {
         (*p).on = false;
         return false;
     }
     (*p).live = true;
-    (*p).w = e.alpha * (*p).t;
+    (*p).w = select(e.alpha * (*p).t, e.alpha, average);
+    (*p).wsum += (*p).w;
     (*p).t = t_next;
     (*p).last_k = k + 1u;
     return true;
@@ -116,15 +127,20 @@ fn finish(p: Pixel, x: u32, y: u32, gain: f32, l: ptr<function, array<vec4<f32>,
     if x >= view.width || y >= view.height {
         return;
     }
+    // The weighted mean scaled by the coverage (`view.average`), else the sums as they are.
+    var scale = 1.0;
+    if view.average != 0u && p.wsum > 0.0 {
+        scale = (1.0 - p.t) / p.wsum;
+    }
     for (var q = 0u; q < CH; q++) {
-        out_logits[p.pix * CH + q] = (*l)[q][j];
+        out_logits[p.pix * CH + q] = (*l)[q][j] * scale;
     }
     let o = PIX_STRIDE * p.pix;
     for (var j = 0u; j < 3u; j++) {
-        px_out[o + j] = gain * p.c[j] + view.exposure_b;
-        px_out[o + 7u + j] = p.c[j];
+        px_out[o + j] = gain * p.c[j] * scale + view.exposure_b;
+        px_out[o + 7u + j] = p.c[j] * scale;
     }
-    px_out[o + 3u] = p.depth;
+    px_out[o + 3u] = p.depth * scale;
     px_out[o + 4u] = 1.0 - p.t;
     px_out[o + 5u] = p.t;
     px_out[o + 6u] = bitcast<f32>(p.last_k);

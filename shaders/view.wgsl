@@ -23,7 +23,9 @@ struct View {
     count: u32,
     // 1: composite only the pixels inside the loss mask (training), see rasterize.
     masked: u32,
-    pad0: u32,
+    // 1: the map's view (`Compositing::Average`): the alpha-weighted mean of the
+    // surfels a pixel meets, whatever their order; see rasterize.
+    average: u32,
     pad1: u32,
     pad2: u32,
 }

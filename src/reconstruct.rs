@@ -287,6 +287,32 @@ pub struct Session {
     pub poses: Option<PoseRefiner>,
 }
 
+/// Sets each surfel's colour and class (a confident but not saturated start:
+/// softmax ≈ 0.9 for 9 classes) from its best view; with `hide_unseen`, a surfel no
+/// training view sees becomes transparent, so that the map shows a hole rather than
+/// an invented grey road (otherwise it keeps what it had).
+fn apply_colours(
+    s: &mut crate::grid::Surfels,
+    colours: &[Option<crate::init::ipm::SurfelColour>],
+    chan: &[Option<u8>; 256],
+    hide_unseen: bool,
+) {
+    for (k, c) in colours.iter().enumerate() {
+        match c {
+            None if hide_unseen => s.opacity[k] = UNSEEN_OPACITY_LOGIT,
+            None => {}
+            Some((rgb, id)) => {
+                s.rgb[k] = *rgb;
+                let logits = &mut s.logits[k * s.classes..(k + 1) * s.classes];
+                logits.fill(0.0);
+                if let Some(q) = chan[*id as usize] {
+                    logits[q as usize] = 4.0;
+                }
+            }
+        }
+    }
+}
+
 /// Dense channel and class id of every road class (the BEV semantic layer's choices).
 pub fn road_channels(b: &Bundle) -> Vec<(usize, u8)> {
     b.manifest
@@ -344,28 +370,7 @@ impl Session {
         let poses = PoseIndex::new(&planes);
         let holdout = cfg.train.holdout_every;
         let mut s = prepared.surfels;
-        let colours = crate::init::ipm::surfel_colours(b, &prepared.grid, &s.z, &poses, &|f| {
-            !is_holdout(f, holdout) && near(f)
-        })?;
-        let chan = targets::channel_of(m);
-        for (k, c) in colours.iter().enumerate() {
-            // No training view sees this surfel: make it transparent, so that the map
-            // shows a hole rather than an invented grey road.
-            if c.is_none() {
-                s.opacity[k] = UNSEEN_OPACITY_LOGIT;
-            }
-            if let Some((rgb, id)) = c {
-                s.rgb[k] = *rgb;
-                if let Some(q) = chan[*id as usize] {
-                    // A confident but not saturated start: softmax ≈ 0.9 for 9 classes.
-                    s.logits[k * s.classes + q as usize] = 4.0;
-                }
-            }
-        }
-        timings.colour_ms = t.elapsed().as_secs_f64() * 1e3;
-        let t = Instant::now();
         let origin = local_origin(&prepared.grid, &s);
-        let initial = params(&prepared.grid, &s, origin);
         let lidar = if cfg.train.use_lidar && cfg.train.loss.lidar > 0.0 {
             lidar_world_of(b, pcfg.frames.as_deref())?.0
         } else {
@@ -379,6 +384,37 @@ impl Session {
             origin[2],
             &cfg.train.loss,
         );
+        let use_frame = |f: usize| !is_holdout(f, holdout) && near(f);
+        let colours =
+            crate::init::ipm::surfel_colours(b, &prepared.grid, &s.z, &poses, &use_frame)?;
+        let chan = targets::channel_of(m);
+        apply_colours(&mut s, &colours, &chan, true);
+        // The model before optimisation: the IPM baseline, on the pose plane.
+        let initial = params(&prepared.grid, &s, origin);
+        let on_lidar = !cfg.baseline_ipm && cfg.train.lidar_colours && reg.with_lidar > 0;
+        let start = if on_lidar {
+            // Training starts from the colours where the LiDAR puts each surfel.
+            let z: Vec<f32> =
+                s.z.iter()
+                    .zip(&reg.priors)
+                    .map(|(&z, p)| {
+                        if p[3] > 0.0 {
+                            p[2] + origin[2] as f32
+                        } else {
+                            z
+                        }
+                    })
+                    .collect();
+            let colours =
+                crate::init::ipm::surfel_colours(b, &prepared.grid, &z, &poses, &use_frame)?;
+            let mut s = s.clone();
+            apply_colours(&mut s, &colours, &chan, false);
+            params(&prepared.grid, &s, origin)
+        } else {
+            initial.clone()
+        };
+        timings.colour_ms = t.elapsed().as_secs_f64() * 1e3;
+        let t = Instant::now();
         let (mut train_views, mut holdout_views) = split_views(m, holdout);
         let mut extent = scene_extent(m);
         if let Some(tile) = tile {
@@ -405,7 +441,7 @@ impl Session {
         order.truncate(cfg.train.max_steps.unwrap_or(usize::MAX));
         let trainer = Trainer::new(
             ctx,
-            &initial,
+            &start,
             &reg,
             m.cameras.len(),
             &cfg.train,

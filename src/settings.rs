@@ -100,6 +100,10 @@ pub struct Settings {
     /// default, disables it; docs/QUALITY.md says what it costs on parked cars).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub robust_c: Option<f32>,
+    /// Start training from the colours on the LiDAR surface (`TrainConfig::
+    /// lidar_colours`; default true).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lidar_colours: Option<bool>,
 }
 
 /// What a front end uses where a setting is absent.
@@ -198,6 +202,9 @@ impl Settings {
             Some(r) => r,
             None => 0.0,
         };
+        if let Some(v) = self.lidar_colours {
+            c.train.lidar_colours = v;
+        }
         if let Some(a) = self.adam.as_deref() {
             c.train.adam = crate::optim::AdamScope::parse(a)
                 .ok_or_else(|| format!("adam {a:?}: expected \"dense\" or \"selective\""))?;

@@ -108,6 +108,15 @@ fn gpu_forward_matches_the_oracle_across_scan_blocks() {
     assert!(d.forward < 1e-4, "forward max abs error {}", d.forward);
 }
 
+/// The map's view (the alpha-weighted mean of a pixel's surfels, whatever their
+/// order) on the GPU equals the oracle's.
+#[test]
+fn gpu_average_compositing_matches_the_oracle() {
+    let c = ctx();
+    let d = pollster::block_on(rogs::render::check::compare_forward_average(&c)).expect("gpu");
+    assert!(d < 1e-4, "forward max abs error {d}");
+}
+
 /// The BEV lists per chunk only the surfels that can reach it (so that a large model
 /// needs no per-view buffer of its own size); the image must be the one every surfel
 /// listed for every chunk gives.

@@ -202,7 +202,7 @@ pub async fn render(
         let (c0, r0) = ((k as u32 % cw) * CHUNK, (k as u32 / cw) * CHUNK);
         let z_mean = sum / count as f64;
         let cam = chunk_camera(g, origin, c0, r0, z_mean);
-        let f = raster.forward(ctx, gp, &cam, &cull).await?;
+        let f = raster.forward_map(ctx, gp, &cam, &cull).await?;
         let img = GpuRasterizer::read_image(ctx, &f).await?;
         let zc = z_mean + HEIGHT_M;
         for y in 0..CHUNK.min(g.height - r0) {

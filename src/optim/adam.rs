@@ -12,7 +12,10 @@ use serde::Serialize;
 /// the run, 10× the paper's 1.6e-4 → 1.6e-6. The paper's schedule runs over thousands
 /// of steps per epoch; a small bundle has ~100, and at the paper's rate the surfels
 /// can move only ~4 cm in total (measured on `demo`: elevation RMSE 4.4 cm at the
-/// paper's rate, 1.2 cm at this one; docs/QUALITY.md).
+/// paper's rate, 1.2 cm at this one; docs/QUALITY.md). Colour: 2e-3, a quarter of the
+/// paper's 8e-3: the colours start from the best view's pixels on the LiDAR surface,
+/// and larger steps only add noise to them (`demo`: 27.67 dB at 2e-3, 27.44 at 4e-3,
+/// 26.57 at 8e-3; docs/QUALITY.md).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct LearningRates {
     pub z_start: f32,
@@ -36,7 +39,7 @@ impl Default for LearningRates {
             rotation: 1e-4,
             scale: 1e-4,
             opacity: 1e-4,
-            rgb: 8e-3,
+            rgb: 2e-3,
             logits: 0.1,
             exposure: 1e-3,
             beta1: 0.9,

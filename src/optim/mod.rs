@@ -25,6 +25,11 @@ pub struct TrainConfig {
     pub cull: CullConfig,
     /// Use the LiDAR elevation term when the bundle has LiDAR.
     pub use_lidar: bool,
+    /// Start the colours and classes from the best view's pixel where a surfel's
+    /// LiDAR elevation puts it, rather than where the pose plane does (when the
+    /// LiDAR term is on): a few centimetres of height move the pixel a surfel
+    /// samples by decimetres. The IPM baseline keeps the pose plane's.
+    pub lidar_colours: bool,
     /// Leave every K-th frame out of training (for held-out evaluation).
     pub holdout_every: Option<usize>,
     /// Stop after this many steps (benchmarks: time a part of an epoch).
@@ -88,6 +93,7 @@ impl Default for TrainConfig {
             loss: LossConfig::default(),
             cull: CullConfig::default(),
             use_lidar: true,
+            lidar_colours: true,
             holdout_every: None,
             max_steps: None,
             moment_window: None,

@@ -529,6 +529,7 @@ impl Trainer {
                 Some((&self.exposure, 8 * camera as u64)),
                 Some(target),
                 capacity,
+                crate::render::Compositing::Occlusion,
             )
             .await?;
         let npx = cam.width * cam.height;

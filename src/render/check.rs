@@ -119,6 +119,29 @@ pub async fn compare(
     })
 }
 
+/// The map's view (`Compositing::Average`) on the GPU against the oracle, on the
+/// test scene seen from its road camera: max abs difference of colour, logits,
+/// depth and alpha.
+pub async fn compare_forward_average(ctx: &GpuContext) -> Result<f32, GpuError> {
+    let ch = 3;
+    let (p, cam) = test_scene(ch);
+    let cull = CullConfig::default();
+    let oracle = super::rasterize::render_with(&p, &cam, &cull, super::Compositing::Average);
+    let r = GpuRasterizer::new(ctx, ch as u32).await?;
+    let gp = GpuRasterizer::upload(ctx, &p);
+    let f = r.forward_map(ctx, &gp, &cam, &cull).await?;
+    let img = GpuRasterizer::read_image(ctx, &f).await?;
+    let o = &oracle.image;
+    Ok([
+        max_diff(&img.rgb, &o.rgb),
+        max_diff(&img.logits, &o.logits),
+        max_diff(&img.depth, &o.depth),
+        max_diff(&img.alpha, &o.alpha),
+    ]
+    .into_iter()
+    .fold(0.0, f32::max))
+}
+
 /// A forward pass over more candidates than one scan block holds.
 #[derive(Debug)]
 pub struct LargeForward {

@@ -20,7 +20,7 @@
 use super::candidates::candidates;
 use super::project::tile_bits;
 use super::rasterize_backward::{OutputGrads, VIEW_GRAD};
-use super::{CullConfig, Image, Params, ViewCamera, TILE};
+use super::{Compositing, CullConfig, Image, Params, ViewCamera, TILE};
 use crate::gpu::buffers::{
     bind, bind_ranges, dispatch, init_storage, pipeline, storage, uniform, window,
 };
@@ -153,6 +153,7 @@ fn view_bytes(
     count: u32,
     channels: u32,
     masked: bool,
+    comp: Compositing,
 ) -> Vec<u8> {
     let mut f: Vec<u32> = Vec::with_capacity(32);
     for row in &cam.world_to_cam {
@@ -162,7 +163,8 @@ fn view_bytes(
     f.extend([cam.width, cam.height, cam.tiles_x(), cam.tiles_y()]);
     f.extend([cull.near, cull.far, cull.half_width, cam.exposure[0]].map(f32::to_bits));
     f.extend([cam.exposure[1].to_bits(), tile_bits(cam), channels, count]);
-    f.extend([masked as u32, 0, 0, 0]);
+    let average = comp == Compositing::Average;
+    f.extend([masked as u32, average as u32, 0, 0]);
     bytemuck::cast_slice(&f).to_vec()
 }
 
@@ -287,7 +289,20 @@ impl GpuRasterizer {
         cam: &ViewCamera,
         cull: &CullConfig,
     ) -> Result<GpuForward, GpuError> {
-        self.forward_with(ctx, p, cam, cull, None, None, None).await
+        self.forward_with(ctx, p, cam, cull, None, None, None, Compositing::Occlusion)
+            .await
+    }
+
+    /// The forward pass of the map's view from above (`Compositing::Average`).
+    pub async fn forward_map(
+        &self,
+        ctx: &GpuContext,
+        p: &GpuParams,
+        cam: &ViewCamera,
+        cull: &CullConfig,
+    ) -> Result<GpuForward, GpuError> {
+        self.forward_with(ctx, p, cam, cull, None, None, None, Compositing::Average)
+            .await
     }
 
     /// The forward pass; with `exposure` = (buffer, byte offset), the view's exposure
@@ -298,7 +313,8 @@ impl GpuRasterizer {
     /// the pair buffers hold that many pairs and the count is not read back, so the
     /// whole pass is encoded without waiting for the GPU: the caller compares `total`
     /// with the capacity afterwards (the kernels clamp to it, so an overflow gives a
-    /// wrong image, never an out-of-bounds access).
+    /// wrong image, never an out-of-bounds access). `comp` says how a pixel combines
+    /// its surfels (`Compositing`; the backward pass follows `Occlusion` only).
     #[allow(clippy::too_many_arguments)]
     pub async fn forward_with(
         &self,
@@ -309,6 +325,7 @@ impl GpuRasterizer {
         exposure: Option<(&wgpu::Buffer, u64)>,
         mask: Option<&wgpu::Buffer>,
         capacity: Option<u32>,
+        comp: Compositing,
     ) -> Result<GpuForward, GpuError> {
         if p.channels != self.channels {
             return Err(GpuError::Failed(format!(
@@ -328,7 +345,7 @@ impl GpuRasterizer {
             )));
         }
         let cand_buf = init_storage(ctx, "candidates", bytemuck::cast_slice(&cand));
-        let bytes = view_bytes(cam, cull, n, p.channels, mask.is_some());
+        let bytes = view_bytes(cam, cull, n, p.channels, mask.is_some(), comp);
         let view = uniform(ctx, "view", &bytes);
         let (gx, gy) = ctx.dispatch_2d(n.div_ceil(256));
         let grid = uniform(ctx, "grid", bytemuck::cast_slice(&[gx * 256, 0u32, 0, 0]));

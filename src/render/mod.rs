@@ -37,6 +37,23 @@ pub const LOWPASS_INV_SQ: f64 = 2.0;
 /// The surfel footprint extends to this many standard deviations.
 pub const EXTENT_SIGMA: f64 = 3.0;
 
+/// How a pixel combines the surfels it meets.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Compositing {
+    /// Front to back through the depth-sorted list, each surfel weighed by the
+    /// transmittance left (3DGS): what a camera sees, and what training renders.
+    #[default]
+    Occlusion,
+    /// The map's view from above: colour, logits and depth are the surfels'
+    /// alpha-weighted mean, scaled by the coverage 1 − Π(1 − α) (the alpha a front
+    /// to back pass gives too), whatever their order. A road map's surfels are
+    /// coplanar neighbours: sorted front to back, whichever centre lies a millimetre
+    /// higher would cover its neighbours' overlap, which shifts the map downhill by
+    /// half a cell and speckles it where trained heights jitter (docs/QUALITY.md).
+    /// Forward only (nothing trains through the map's view).
+    Average,
+}
+
 /// The box in front of the camera whose surfels are rendered (the official code uses
 /// 40 m × 50 m with near/far 1 m / 20 m).
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -5,8 +5,8 @@
 use super::project::{tile_lists, Projected};
 use super::real::{dot, scale, sub, Real, V3};
 use super::{
-    CullConfig, Image, Params, ViewCamera, LOWPASS_INV_SQ, MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE,
-    TILE,
+    Compositing, CullConfig, Image, Params, ViewCamera, LOWPASS_INV_SQ, MAX_ALPHA, MIN_ALPHA,
+    MIN_TRANSMITTANCE, TILE,
 };
 
 /// One surfel evaluated at one pixel.
@@ -105,8 +105,19 @@ pub fn tile_ranges(pairs: &[(u32, u32)], tiles: u32, tile_bits: u32) -> Vec<(usi
 }
 
 // Index loops mirror the kernel line by line, which is the point of an oracle.
-#[allow(clippy::needless_range_loop)]
 pub fn render<R: Real>(p: &Params<R>, cam: &ViewCamera, cull: &CullConfig) -> Forward<R> {
+    render_with(p, cam, cull, Compositing::Occlusion)
+}
+
+/// `render` with the given compositing (`Compositing::Average`: the map's view).
+#[allow(clippy::needless_range_loop)]
+pub fn render_with<R: Real>(
+    p: &Params<R>,
+    cam: &ViewCamera,
+    cull: &CullConfig,
+    comp: Compositing,
+) -> Forward<R> {
+    let average = comp == Compositing::Average;
     let (projected, pairs) = tile_lists(p, cam, cull);
     let ranges = tile_ranges(
         &pairs,
@@ -138,6 +149,7 @@ pub fn render<R: Real>(p: &Params<R>, cam: &ViewCamera, cull: &CullConfig) -> Fo
             let (px, py) = (R::of(x as f64 + 0.5), R::of(y as f64 + 0.5));
             let mut t = R::of(1.0);
             let mut c = [zero; 3];
+            let mut wsum = zero;
             for k in start..end {
                 let i = pairs[k].1 as usize;
                 let Some(s) = &projected[i] else { continue };
@@ -146,10 +158,11 @@ pub fn render<R: Real>(p: &Params<R>, cam: &ViewCamera, cull: &CullConfig) -> Fo
                     continue;
                 }
                 let t_next = t * (R::of(1.0) - e.alpha);
-                if t_next < R::of(MIN_TRANSMITTANCE) {
+                if t_next < R::of(MIN_TRANSMITTANCE) && !average {
                     break;
                 }
-                let wgt = e.alpha * t;
+                let wgt = if average { e.alpha } else { e.alpha * t };
+                wsum += wgt;
                 for (cc, &pc) in c.iter_mut().zip(&p.rgb[i]) {
                     *cc += pc * wgt;
                 }
@@ -159,6 +172,15 @@ pub fn render<R: Real>(p: &Params<R>, cam: &ViewCamera, cull: &CullConfig) -> Fo
                 image.depth[pix] += s.pc[2] * wgt;
                 t = t_next;
                 last[pix] = k + 1;
+            }
+            if average && wsum > zero {
+                // The weighted mean, scaled by the coverage.
+                let scale = (R::of(1.0) - t) / wsum;
+                c.iter_mut().for_each(|v| *v = *v * scale);
+                for j in 0..ch {
+                    image.logits[pix * ch + j] = image.logits[pix * ch + j] * scale;
+                }
+                image.depth[pix] = image.depth[pix] * scale;
             }
             for j in 0..3 {
                 colour[3 * pix + j] = c[j];
@@ -176,5 +198,64 @@ pub fn render<R: Real>(p: &Params<R>, cam: &ViewCamera, cull: &CullConfig) -> Fo
         t_final,
         last,
         colour,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two overlapping coplanar surfels, red and blue, seen from 10 m straight above,
+    /// one a millimetre above the other, then the other way round.
+    fn pair(red_higher: bool, comp: Compositing) -> Vec<f64> {
+        let cam = ViewCamera {
+            world_to_cam: [
+                [1.0, 0.0, 0.0, 0.0],
+                [0.0, -1.0, 0.0, 0.0],
+                [0.0, 0.0, -1.0, 10.0],
+            ],
+            fx: 160.0,
+            fy: 160.0,
+            cx: 8.0,
+            cy: 8.0,
+            width: 16,
+            height: 16,
+            exposure: [0.0, 0.0],
+        };
+        let dz = if red_higher { 0.001 } else { -0.001 };
+        let p = Params::<f64> {
+            pos: vec![[-0.05, 0.0, dz], [0.05, 0.0, 0.0]],
+            rotation: vec![[1.0, 0.0, 0.0, 0.0]; 2],
+            log_scale: vec![[0.06f64.ln(); 2]; 2],
+            opacity: vec![2.0; 2],
+            rgb: vec![[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]],
+            logits: vec![],
+            channels: 0,
+        };
+        let cull = CullConfig::default();
+        render_with(&p, &cam, &cull, comp).image.rgb
+    }
+
+    #[test]
+    fn the_maps_view_does_not_depend_on_which_coplanar_surfel_lies_higher() {
+        let diff = |comp| {
+            let (a, b) = (pair(true, comp), pair(false, comp));
+            a.iter()
+                .zip(&b)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0, f64::max)
+        };
+        // Front to back, the higher one covers the overlap: the image changes.
+        assert!(diff(Compositing::Occlusion) > 0.1);
+        assert!(diff(Compositing::Average) < 1e-9);
+        // Between the two centres both colours count.
+        let img = pair(true, Compositing::Average);
+        let mid = 3 * (8 * 16 + 8);
+        let (r, b) = (img[mid], img[mid + 2]);
+        assert!(
+            r > 0.2 * (r + b) && b > 0.2 * (r + b),
+            "{:?}",
+            &img[mid..mid + 3]
+        );
     }
 }

@@ -439,12 +439,16 @@ impl Session {
             .flat_map(|e| epoch_order(train_views.len(), cfg.train.seed, e))
             .collect();
         order.truncate(cfg.train.max_steps.unwrap_or(usize::MAX));
+        let mut train = cfg.train.clone();
+        if on_lidar {
+            train.lr.rgb = train.lr.rgb_on_lidar;
+        }
         let trainer = Trainer::new(
             ctx,
             &start,
             &reg,
             m.cameras.len(),
-            &cfg.train,
+            &train,
             extent,
             order.len(),
         )

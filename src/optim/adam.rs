@@ -12,10 +12,11 @@ use serde::Serialize;
 /// the run, 10× the paper's 1.6e-4 → 1.6e-6. The paper's schedule runs over thousands
 /// of steps per epoch; a small bundle has ~100, and at the paper's rate the surfels
 /// can move only ~4 cm in total (measured on `demo`: elevation RMSE 4.4 cm at the
-/// paper's rate, 1.2 cm at this one; docs/QUALITY.md). Colour: 2e-3, a quarter of the
-/// paper's 8e-3: the colours start from the best view's pixels on the LiDAR surface,
-/// and larger steps only add noise to them (`demo`: 27.67 dB at 2e-3, 27.44 at 4e-3,
-/// 26.57 at 8e-3; docs/QUALITY.md).
+/// paper's rate, 1.2 cm at this one; docs/QUALITY.md). Colour: the paper's 8e-3, but
+/// `rgb_on_lidar` (a quarter of it) when the colours start from the best view's pixels
+/// on the LiDAR surface, where larger steps only add noise (`demo`: 27.67 dB at 2e-3,
+/// 27.44 at 4e-3, 26.57 at 8e-3), while a start on the pose plane needs the larger
+/// steps (KITTI, no LiDAR: held-out 22.53 dB at 8e-3, 21.91 at 2e-3; docs/QUALITY.md).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct LearningRates {
     pub z_start: f32,
@@ -24,6 +25,9 @@ pub struct LearningRates {
     pub scale: f32,
     pub opacity: f32,
     pub rgb: f32,
+    /// The colour rate when training starts from colours on the LiDAR surface
+    /// (`TrainConfig::lidar_colours`).
+    pub rgb_on_lidar: f32,
     pub logits: f32,
     pub exposure: f32,
     pub beta1: f32,
@@ -39,7 +43,8 @@ impl Default for LearningRates {
             rotation: 1e-4,
             scale: 1e-4,
             opacity: 1e-4,
-            rgb: 2e-3,
+            rgb: 8e-3,
+            rgb_on_lidar: 2e-3,
             logits: 0.1,
             exposure: 1e-3,
             beta1: 0.9,
@@ -60,6 +65,7 @@ impl LearningRates {
             ("scale", self.scale),
             ("opacity", self.opacity),
             ("rgb", self.rgb),
+            ("rgb_on_lidar", self.rgb_on_lidar),
             ("logits", self.logits),
             ("exposure", self.exposure),
         ];

@@ -391,7 +391,13 @@ impl Session {
         apply_colours(&mut s, &colours, &chan, true);
         // The model before optimisation: the IPM baseline, on the pose plane.
         let initial = params(&prepared.grid, &s, origin);
-        let on_lidar = !cfg.baseline_ipm && cfg.train.lidar_colours && reg.with_lidar > 0;
+        // Not with pose refinement: colours copied from each surfel's nearest view
+        // through its given pose agree with that pose's error from the start, and
+        // leave refinement nothing to pull on (docs/QUALITY.md).
+        let on_lidar = !cfg.baseline_ipm
+            && cfg.train.lidar_colours
+            && cfg.poses.is_none()
+            && reg.with_lidar > 0;
         let start = if on_lidar {
             // Training starts from the colours where the LiDAR puts each surfel.
             let z: Vec<f32> =

@@ -104,6 +104,10 @@ pub struct Settings {
     /// lidar_colours`; default true).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub lidar_colours: Option<bool>,
+    /// Learning rates by name (`LearningRates::set`: "rgb", "logits", "opacity", …),
+    /// over the defaults.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub lr: Vec<(String, f32)>,
 }
 
 /// What a front end uses where a setting is absent.
@@ -202,6 +206,10 @@ impl Settings {
             Some(r) => r,
             None => 0.0,
         };
+        for (name, v) in &self.lr {
+            c.train.lr.set(name, *v)?;
+        }
+        c.train.lr.check()?;
         if let Some(v) = self.lidar_colours {
             c.train.lidar_colours = v;
         }
@@ -286,7 +294,8 @@ mod tests {
         let (m, _) = crate::bundle::example::tiny();
         let s: Settings = serde_json::from_str(
             r#"{"resolution": 0.2, "seed": 5, "max_steps": 12, "traj_loss": false,
-                "lidar_gate": 0.7, "lr_z_start": 0.002, "baseline": "ipm", "tile_m": 24}"#,
+                "lidar_gate": 0.7, "lr_z_start": 0.002, "baseline": "ipm", "tile_m": 24,
+                "lr": [["rgb", 0.004], ["logits", 0.05]]}"#,
         )
         .expect("settings");
         let c = s.config(&m, PAGE).expect("config");
@@ -295,6 +304,7 @@ mod tests {
         assert_eq!(c.train.loss.traj, 0.0);
         assert_eq!(c.train.loss.lidar_gate_m, 0.7);
         assert_eq!(c.train.lr.z_start, 0.002);
+        assert_eq!((c.train.lr.rgb, c.train.lr.logits), (0.004, 0.05));
         assert!(c.baseline_ipm);
         let t = s.tiling().expect("tiling").expect("tiled");
         assert_eq!((t.size_m, t.overlap_m), (24.0, DEFAULT_OVERLAP_M));
@@ -317,6 +327,11 @@ mod tests {
                 "pose_start 1.5",
             ),
             (r#"{"refine_poses": true, "pose_lr_m": 0}"#, "pose_lr_m 0"),
+            (
+                r#"{"lr": [["colour", 0.1]]}"#,
+                "no learning rate is called \"colour\"",
+            ),
+            (r#"{"lr": [["rgb", -1]]}"#, "the rgb learning rate is -1"),
         ] {
             let s: Settings = serde_json::from_str(json).expect("settings");
             let e = s.config(&m, PAGE).expect_err(json);

@@ -66,16 +66,18 @@ fn demo_reconstruction_beats_the_ipm_baseline_and_meets_measured_floors() {
     assert!(e < 0.5 * e0, "elevation RMSE {e} m, initial {e0} m");
     // The exact-pose LiDAR reference: what the paper's procedure makes of these
     // inputs. Measured: reference 26.2 dB / 0.924 over 12 695 cells, the map
-    // 22.9 dB / 0.778 there; initial surface 8.04 cm, as the IPM baseline's.
+    // 27.7 dB / 0.854 there (22.9 / 0.778 before the map's view averaged coplanar
+    // surfels and colours started on the LiDAR surface); initial surface 8.04 cm,
+    // as the IPM baseline's.
     let r = m.vs_reference.clone().expect("exact-pose reference");
     eprintln!("vs reference: {r:?}");
     let (rp, rm) = (r.ref_psnr_db.unwrap(), r.ref_miou.unwrap());
     assert!(r.cells > 10_000, "{r:?}");
     assert!(rp > 25.0 && rm > 0.85, "{r:?}");
-    assert!(
-        r.map_psnr_db.unwrap() < rp && r.map_miou.unwrap() < rm,
-        "{r:?}"
-    );
+    // Without pose noise the map should at least equal the reference (issue
+    // floor); its classes are still below it.
+    assert!(r.map_psnr_db.unwrap() > rp, "{r:?}");
+    assert!(r.map_miou.unwrap() > rm - 0.12, "{r:?}");
     assert!(
         (r.map_psnr_db.unwrap() - m.psnr_db.unwrap()).abs() < 1.0,
         "the map over the reference's cells and over all: {r:?} {m:?}"

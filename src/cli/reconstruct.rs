@@ -128,6 +128,10 @@ pub struct SettingsArgs {
     /// ablation: the LiDAR's start is 3 dB better on `demo`, docs/QUALITY.md).
     #[arg(long)]
     no_lidar_colours: bool,
+    /// Set a learning rate by name, e.g. `--lr rgb=4e-3` (repeatable): z_start,
+    /// z_end, rotation, scale, opacity, rgb, rgb_on_lidar, logits, exposure.
+    #[arg(long, value_name = "NAME=RATE", value_parser = parse_rate)]
+    lr: Vec<(String, f32)>,
     /// Leave every K-th frame out of training and report road PSNR on those views,
     /// for the result and for the IPM baseline.
     #[arg(long)]
@@ -254,8 +258,20 @@ impl SettingsArgs {
             adam: Some(a.adam.name().into()),
             robust_c: a.robust_c,
             lidar_colours: a.no_lidar_colours.then_some(false),
+            lr: a.lr.clone(),
         }
     }
+}
+
+/// `NAME=RATE` of `--lr`.
+fn parse_rate(s: &str) -> Result<(String, f32), String> {
+    let (name, v) = s
+        .split_once('=')
+        .ok_or_else(|| format!("{s:?}: expected NAME=RATE, such as rgb=4e-3"))?;
+    let v: f32 = v
+        .parse()
+        .map_err(|_| format!("{v:?} is not a number (in {s:?})"))?;
+    Ok((name.to_string(), v))
 }
 
 /// Opens the bundles and merges them into one; on bad input, the exit code (the

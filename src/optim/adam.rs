@@ -55,21 +55,42 @@ impl Default for LearningRates {
 }
 
 impl LearningRates {
+    /// The rates a front end may set by name, and where each lives.
+    fn named(&mut self) -> [(&'static str, &mut f32); 9] {
+        [
+            ("z_start", &mut self.z_start),
+            ("z_end", &mut self.z_end),
+            ("rotation", &mut self.rotation),
+            ("scale", &mut self.scale),
+            ("opacity", &mut self.opacity),
+            ("rgb", &mut self.rgb),
+            ("rgb_on_lidar", &mut self.rgb_on_lidar),
+            ("logits", &mut self.logits),
+            ("exposure", &mut self.exposure),
+        ]
+    }
+
+    /// Sets the rate called `name` (`check` then judges the value).
+    pub fn set(&mut self, name: &str, v: f32) -> Result<(), String> {
+        let mut rates = self.named();
+        let known: Vec<&str> = rates.iter().map(|r| r.0).collect();
+        let known = known.join(", ");
+        match rates.iter_mut().find(|r| r.0 == name) {
+            Some(r) => {
+                *r.1 = v;
+                Ok(())
+            }
+            None => Err(format!(
+                "no learning rate is called {name:?}; the rates are {known}"
+            )),
+        }
+    }
+
     /// Refuses constants that could make an update non-finite (with finite
     /// gradients below 1e18 and these, every Adam step is finite).
     pub fn check(&self) -> Result<(), String> {
-        let rates = [
-            ("z_start", self.z_start),
-            ("z_end", self.z_end),
-            ("rotation", self.rotation),
-            ("scale", self.scale),
-            ("opacity", self.opacity),
-            ("rgb", self.rgb),
-            ("rgb_on_lidar", self.rgb_on_lidar),
-            ("logits", self.logits),
-            ("exposure", self.exposure),
-        ];
-        for (name, v) in rates {
+        let mut copy = self.clone();
+        for (name, v) in copy.named().map(|(n, v)| (n, *v)) {
             let positive = name.starts_with("z_");
             if !((0.0..=1e3).contains(&v) && (!positive || v > 0.0)) {
                 return Err(format!(

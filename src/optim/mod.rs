@@ -28,7 +28,8 @@ pub struct TrainConfig {
     /// Start the colours and classes from the best view's pixel where a surfel's
     /// LiDAR elevation puts it, rather than where the pose plane does (when the
     /// LiDAR term is on): a few centimetres of height move the pixel a surfel
-    /// samples by decimetres. The IPM baseline keeps the pose plane's.
+    /// samples by decimetres. The IPM baseline keeps the pose plane's, and so does
+    /// a run that refines its poses (such a start bakes each view's pose error in).
     pub lidar_colours: bool,
     /// Leave every K-th frame out of training (for held-out evaluation).
     pub holdout_every: Option<usize>,

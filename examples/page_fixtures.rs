@@ -7,7 +7,8 @@
 //! be), `bad-format.rogsmap` and `truncated.rogsmap` (damaged), and `points.json`
 //! (world points on the road with their level-0 elevation, read natively), and
 //! `splats-z.ply`, `splats-y.ply`, `splats-semantic.ply` with `splats.json` (the
-//! surfels they hold, for a real splat reader to be checked against).
+//! surfels they hold, for a real splat reader to be checked against), and the catalogue
+//! of malformed bundles in `catalogue/` (`rogs example --malformed`).
 //! Usage: `cargo run --example page_fixtures -- OUT_DIR`.
 
 use rogs::bundle::example::{self, png_gray};
@@ -56,6 +57,7 @@ fn main() -> Result<(), String> {
     .map_err(|e| e.to_string())?;
     maps(&out)?;
     splats(&out)?;
+    rogs::bundle::catalogue::write(&out.join("catalogue"))?;
     eprintln!(
         "wrote {}/valid.zip, invalid.zip, demo.zip, unlabelled.zip and the map files",
         out.display()

@@ -4,6 +4,7 @@
 //! bytes); `Bundle::open` natively also takes a folder. Opening validates the whole
 //! bundle, so later stages may rely on every file being present and well formed.
 
+pub mod catalogue;
 mod error;
 pub mod example;
 mod lazy;
@@ -39,12 +40,37 @@ pub const MANIFEST: &str = "manifest.json";
 /// Parses manifest.json, naming the field of a type error (a string where a number
 /// belongs, a missing key, `null` where a number was expected).
 pub fn parse_manifest(text: &[u8]) -> Result<Manifest, Problem> {
+    // serde reads a struct from a JSON list too (fields in order): name the real mistake.
+    match text.iter().find(|b| !b.is_ascii_whitespace()) {
+        Some(b'{') | None => {}
+        Some(&b) => {
+            let found = match b {
+                b'[' => "a list",
+                b'"' => "a string",
+                b'n' => "null",
+                b't' | b'f' => "a boolean",
+                _ => "a number or something else",
+            };
+            return Err(Problem::ManifestField {
+                field: MANIFEST.into(),
+                what: format!(
+                    "found {found} at the top level; expected an object {{ \"format\": \"rogs-bundle\", … }}"
+                ),
+            });
+        }
+    }
     let de = &mut serde_json::Deserializer::from_slice(text);
     serde_path_to_error::deserialize(de).map_err(|e| {
         let field = e.path().to_string();
         let inner = e.into_inner();
-        if inner.is_syntax() || inner.is_eof() || field == "." {
+        if inner.is_syntax() || inner.is_eof() {
             Problem::ManifestSyntax(inner.to_string())
+        } else if field == "." {
+            // A required top-level field is missing: the manifest itself is named.
+            Problem::ManifestField {
+                field: MANIFEST.into(),
+                what: format!("{inner}"),
+            }
         } else {
             Problem::ManifestField {
                 field,

@@ -17,6 +17,13 @@ const MOUNT_ADVICE: &str = "Mounts are metres in the vehicle frame (check the un
 
 /// Largest tolerated deviation of RᵀR from the identity.
 pub const ROTATION_TOLERANCE: f64 = 1e-3;
+/// The vehicle frame's origin above the road, metres: a frame under the road or on a
+/// mast is a unit or sign mistake.
+pub const MIN_VEHICLE_HEIGHT_M: f64 = -2.0;
+pub const MAX_VEHICLE_HEIGHT_M: f64 = 10.0;
+/// A bundle's own corridor half-width, metres: from a lane to a wide square.
+pub const MIN_CORRIDOR_M: f64 = 0.5;
+pub const MAX_CORRIDOR_M: f64 = 100.0;
 
 /// Checks the manifest against the files in `source`: every problem found, and when
 /// there is none, advice on a legal bundle that cannot make a useful map (a vehicle
@@ -182,6 +189,28 @@ impl<'a> Validator<'a> {
             self.problems.push(Problem::NonFinite {
                 field: "vehicle_height_m".into(),
             });
+        } else if !(MIN_VEHICLE_HEIGHT_M..=MAX_VEHICLE_HEIGHT_M).contains(&m.vehicle_height_m) {
+            self.invalid(
+                "vehicle_height_m",
+                format!(
+                    "{} m; expected {MIN_VEHICLE_HEIGHT_M} to {MAX_VEHICLE_HEIGHT_M} m: the height of the \
+                     vehicle frame's origin above the road (0 for an origin on the ground, about \
+                     1.7 for a roof LiDAR's frame)",
+                    m.vehicle_height_m
+                ),
+            );
+        }
+        if let Some(hw) = m.corridor_half_width_m {
+            if !(hw.is_finite() && (MIN_CORRIDOR_M..=MAX_CORRIDOR_M).contains(&hw)) {
+                self.invalid(
+                    "corridor_half_width_m",
+                    format!(
+                        "{hw} m; expected {MIN_CORRIDOR_M} to {MAX_CORRIDOR_M} m: how far either side of \
+                         the trajectory the map reaches (4 for one carriageway, 8 for a street \
+                         with its sidewalks)"
+                    ),
+                );
+            }
         }
         self.classes(m);
         if m.labelled() {

@@ -20,6 +20,8 @@ function serveFile(req, res, file) {
     const headers = {
       'content-type': TYPES[path.extname(file)] || 'application/octet-stream',
       'cache-control': 'no-store', 'accept-ranges': 'bytes',
+      // A page on another origin may open what is served here (?url= names a server).
+      'access-control-allow-origin': '*',
     };
     const m = /^bytes=(\d*)-(\d*)$/.exec(req.headers.range || '');
     let start = 0, end = st.size - 1, status = 200;

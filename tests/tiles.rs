@@ -552,7 +552,9 @@ fn a_failed_tile_keeps_the_finished_ones_and_the_run_resumes_from_checkpoints() 
     assert!(saved[0].0.ends_with(".tile"));
     // Nothing more runs until the failure is cleared.
     assert!(pollster::block_on(a.step(&b)).expect("stopped").is_none());
-    assert!(a.retry());
+    assert!(a.device_lost(), "the fault destroyed the device");
+    assert!(pollster::block_on(a.retry()).expect("a new device"));
+    assert!(!a.device_lost());
     while pollster::block_on(a.step(&b)).expect("step").is_some() {}
     let whole = pollster::block_on(a.finish(&b, &mut |_, _| {})).expect("finish");
     assert_eq!(a.tiles_done(), a.tiles.len());

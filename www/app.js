@@ -2,7 +2,7 @@
 // ?url=, example) and shows its summary or its problems in words. Nothing here
 // sends user data anywhere: bundles are read in memory by the wasm engine.
 import init, { inspect_bundle, inspect_lazy_bundle, example_bundle, gpu_info } from './pkg/rogs.js';
-import { offerOptimisation, wireMap } from './map.js';
+import { offerOptimisation, setEngineMemory, wireMap } from './map.js';
 import { openReview, wireReview } from './review.js';
 import { blobSource, urlSource, isMapFile } from './rogsmap.js';
 import { LAZY_BYTES, lazyForced, openLazyBundle } from './bundle.js';
@@ -300,11 +300,32 @@ function wireInputs() {
   });
 }
 
+// The second half of the page's Content-Security-Policy (index.html): connections to
+// the page's own origin and to the servers the query names, nothing else. Policies
+// add up (a request must pass each), so a meta added now narrows the static one.
+function narrowConnections(q) {
+  const allowed = new Set(["'self'", 'blob:']);
+  for (const key of ['url', 'map', 'b']) {
+    const v = q.get(key);
+    if (!v) continue;
+    try {
+      const origin = new URL(v, location.href).origin;
+      if (origin !== location.origin) allowed.add(origin);
+    } catch { /* a bad address is explained when it is opened */ }
+  }
+  const m = document.createElement('meta');
+  m.httpEquiv = 'Content-Security-Policy';
+  m.content = `connect-src ${[...allowed].join(' ')}`;
+  document.head.append(m);
+  document.body.dataset.connectSrc = m.content;
+}
+
 async function main() {
+  narrowConnections(new URLSearchParams(location.search));
   wireInputs();
   wireMap(setStatus);
   wireReview(setStatus);
-  engineReady = init();
+  engineReady = init().then((engine) => setEngineMemory(engine.memory));
   try {
     await engineReady;
   } catch (e) {

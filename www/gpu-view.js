@@ -36,6 +36,13 @@ export async function createGpuView(canvas) {
   });
   const sampler = device.createSampler({ magFilter: 'nearest', minFilter: 'linear' });
   const textures = new Map();
+  // One uniform buffer per layer, written before each draw: a buffer made per draw
+  // would stay on the GPU until the garbage collector found it (one per frame).
+  const uniforms = new Map();
+  const uniformOf = (name) => {
+    if (!uniforms.has(name)) uniforms.set(name, device.createBuffer({ size: 32, usage: GPUBufferUsage.UNIFORM | GPUBufferUsage.COPY_DST }));
+    return uniforms.get(name);
+  };
   return {
     kind: 'webgpu',
     // Uploads a layer from a (2D) canvas of the map's size.
@@ -63,7 +70,7 @@ export async function createGpuView(canvas) {
         const l = layers[name];
         const t = textures.get(name);
         if (!l || !l.visible || !t) continue;
-        const u = device.createBuffer({ size: 32, usage: GPUBufferUsage.UNIFORM | GPUBufferUsage.COPY_DST });
+        const u = uniformOf(name);
         device.queue.writeBuffer(u, 0, new Float32Array([canvas.width, canvas.height, t.width, t.height, view.x, view.y, view.scale, l.opacity]));
         pass.setBindGroup(0, device.createBindGroup({
           layout: pipeline.getBindGroupLayout(0),

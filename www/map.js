@@ -15,6 +15,24 @@ let gpuView = null; // the WebGPU renderer of the map canvas, or null for 2D
 let drives = []; // [{ name, bytes }]: one bundle, or several drives of one map
 let classes = [];
 let run = null; // { rec, paused, stopped }
+let engineMemory = null; // the wasm instance's memory: its size after each run is kept on <body>
+let runsDone = 0;
+
+export function setEngineMemory(memory) {
+  engineMemory = memory;
+}
+
+// Object URLs of the exports shown: revoked when the next run's replace them, so that
+// a page used for many runs holds one run's files, not all of them.
+const exportUrls = [];
+function exportUrl(blob) {
+  const u = URL.createObjectURL(blob);
+  exportUrls.push(u);
+  return u;
+}
+function revokeExports() {
+  for (const u of exportUrls.splice(0)) URL.revokeObjectURL(u);
+}
 const view = { scale: 1, x: 0, y: 0, layers: {} };
 
 export function offerOptimisation(list, bundleClasses) {
@@ -58,7 +76,7 @@ function optionalNumber(key, id) {
   return v === '' ? {} : { [key]: Number(v) };
 }
 
-// Fault injection for tests: `?fault_tile=N` makes tile N fail once as a lost device would.
+// Fault injection for tests: `?fault_tile=N` destroys the GPU device once as tile N starts.
 function faultTile() {
   const v = new URLSearchParams(location.search).get('fault_tile');
   return v !== null && /^\d+$/.test(v) ? { fault_tile: Number(v) } : {};
@@ -108,7 +126,14 @@ async function optimise(setStatus) {
     $('run').disabled = false;
     return;
   }
+  // The previous run's engine state (its surfels, GPU buffers and files) goes now:
+  // only one run is held at a time.
+  const previous = run?.rec;
   run = { rec, paused: false, stopped: false };
+  if (previous && previous !== rec) {
+    view.rec = null;
+    previous.free();
+  }
   let total = rec.total_steps();
   const losses = [];
   const t0 = performance.now();
@@ -126,10 +151,17 @@ async function optimise(setStatus) {
       // A tile the machine failed (a lost device) is trained again once; the
       // finished tiles are kept either way.
       const tile = rec.tile();
-      if (!retried.has(tile) && rec.retry()) {
+      const lost = rec.device_lost();
+      let again = false;
+      if (!retried.has(tile)) {
+        try { again = await rec.retry(); } catch (e2) { e = `${e}; a new GPU device could not be had: ${e2}`; }
+      }
+      if (again) {
         retried.add(tile);
         document.body.dataset.retries = String(retried.size);
-        setStatus(`Tile ${tile + 1} failed (${e}); training it again…`, 'info');
+        setStatus(lost
+          ? `The GPU device was lost at tile ${tile + 1} (${e}). The finished tiles are kept; training tile ${tile + 1} again on a new device…`
+          : `Tile ${tile + 1} failed (${e}); training it again…`, 'info');
         continue;
       }
       error = e;
@@ -178,6 +210,9 @@ async function optimise(setStatus) {
     if (kept) $('viewer').hidden = false;
     setStatus(`Could not render the map: ${e}${kept ? '. The trained surfels can still be downloaded (Exports).' : ''}`, 'error');
   }
+  runsDone += 1;
+  document.body.dataset.runs = String(runsDone);
+  if (engineMemory) document.body.dataset.wasmBytes = String(engineMemory.buffer.byteLength);
   $('run').disabled = false;
 }
 
@@ -229,11 +264,12 @@ function trajectoryLayer(t, w, h) {
 function listExports(rec) {
   const ex = $('exports');
   ex.innerHTML = '';
+  revokeExports();
   for (const name of rec.file_names()) {
     const a = document.createElement('a');
     a.textContent = name;
     a.download = name;
-    a.href = URL.createObjectURL(new Blob([rec.file(name)]));
+    a.href = exportUrl(new Blob([rec.file(name)]));
     ex.append(a, ' ');
   }
   if (ex.childElementCount) {
@@ -246,7 +282,7 @@ function listExports(rec) {
       if (all.href.startsWith('blob:')) return; // made once, then a plain download
       e.preventDefault();
       try {
-        all.href = URL.createObjectURL(new Blob([rec.exports_zip()], { type: 'application/zip' }));
+        all.href = exportUrl(new Blob([rec.exports_zip()], { type: 'application/zip' }));
         all.click();
       } catch (err) {
         all.textContent = `all exports (.zip): ${err}`;
@@ -335,7 +371,7 @@ function showMap(rec, report) {
     c.toBlob((b) => {
       const a = document.createElement('a');
       a.download = 'map-as-shown.png';
-      a.href = URL.createObjectURL(b);
+      a.href = exportUrl(b);
       a.click();
     });
   });

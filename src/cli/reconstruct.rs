@@ -80,8 +80,8 @@ pub struct Args {
     /// The tile of --plan to run, by name (`x3_y-2`; plan.json lists them).
     #[arg(long, requires = "plan")]
     tile: Option<String>,
-    /// Fault injection for tests: the tile of this plan index (0-based) fails at its
-    /// first step as a lost device would.
+    /// Fault injection for tests: the GPU device is destroyed (a real device loss)
+    /// as the tile of this plan index (0-based) starts.
     #[arg(long, hide = true)]
     fault_tile: Option<usize>,
 }

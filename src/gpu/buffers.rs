@@ -3,7 +3,6 @@
 //! only the bindings an entry point uses.
 
 use super::GpuContext;
-use wgpu::util::DeviceExt;
 
 const STORAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
     .union(wgpu::BufferUsages::COPY_SRC)
@@ -19,28 +18,42 @@ pub fn storage(ctx: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
     })
 }
 
+/// A buffer of `usage` holding `data` (padded with zeros to at least `min` bytes and
+/// a multiple of `align`). Written through the queue rather than mapped at creation:
+/// on a lost device mapping fails (wgpu's `create_buffer_init` panics then), while a
+/// write is refused quietly and the loss is reported by `GpuContext::check`.
+pub fn with_data(
+    ctx: &GpuContext,
+    label: &str,
+    data: &[u8],
+    usage: wgpu::BufferUsages,
+    align: usize,
+) -> wgpu::Buffer {
+    let size = data.len().max(16).next_multiple_of(align);
+    let buf = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: size as u64,
+        usage: usage | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    if data.len().is_multiple_of(4) {
+        ctx.queue.write_buffer(&buf, 0, data);
+    } else {
+        let mut bytes = data.to_vec();
+        bytes.resize(data.len().next_multiple_of(4), 0);
+        ctx.queue.write_buffer(&buf, 0, &bytes);
+    }
+    buf
+}
+
 /// A storage buffer holding `data`.
 pub fn init_storage(ctx: &GpuContext, label: &str, data: &[u8]) -> wgpu::Buffer {
-    let mut bytes = data.to_vec();
-    bytes.resize(bytes.len().max(16).next_multiple_of(4), 0);
-    ctx.device
-        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(label),
-            contents: &bytes,
-            usage: STORAGE,
-        })
+    with_data(ctx, label, data, STORAGE, 4)
 }
 
 /// A uniform buffer holding `data` (writable later with `queue.write_buffer`).
 pub fn uniform(ctx: &GpuContext, label: &str, data: &[u8]) -> wgpu::Buffer {
-    let mut bytes = data.to_vec();
-    bytes.resize(bytes.len().max(16).next_multiple_of(16), 0);
-    ctx.device
-        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(label),
-            contents: &bytes,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-        })
+    with_data(ctx, label, data, wgpu::BufferUsages::UNIFORM, 16)
 }
 
 /// A compute pipeline with an automatic layout from WGSL `parts`.

@@ -116,6 +116,8 @@ pub struct GpuContext {
     /// The first GPU error no error scope caught (out of memory, a lost device, a
     /// validation error): recorded instead of panicking, and returned by `check()`.
     failure: std::sync::Arc<std::sync::Mutex<Option<String>>>,
+    /// Set by the device-lost callback (`is_lost`).
+    lost: std::sync::Arc<std::sync::atomic::AtomicBool>,
 }
 
 impl GpuContext {
@@ -206,7 +208,10 @@ impl GpuContext {
             record(&slot, msg);
         }));
         let slot = failure.clone();
+        let lost = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let flag = lost.clone();
         device.set_device_lost_callback(move |_, why| {
+            flag.store(true, std::sync::atomic::Ordering::SeqCst);
             record(
                 &slot,
                 format!(
@@ -221,7 +226,38 @@ impl GpuContext {
             features,
             limits,
             failure,
+            lost,
         })
+    }
+
+    /// True once the device is lost (a driver reset, the browser reclaiming it, or
+    /// `lose`): nothing more runs on it; a new context is needed.
+    pub fn is_lost(&self) -> bool {
+        self.lost.load(std::sync::atomic::Ordering::SeqCst)
+    }
+
+    /// Destroys the device as a driver reset would: the fault the tests inject
+    /// (`--fault-tile`, the page's `?fault_tile=`). Every later use fails and
+    /// `check()` says the device was lost.
+    pub fn lose(&self) {
+        self.device.destroy();
+        // Backends report the loss asynchronously (WebGPU's `lost` promise): say it now.
+        self.lost.store(true, std::sync::atomic::Ordering::SeqCst);
+        if let Ok(mut s) = self.failure.lock() {
+            s.get_or_insert_with(|| {
+                "the GPU device was lost (destroyed); close other GPU-heavy pages or programs and try again"
+                    .into()
+            });
+        }
+    }
+
+    /// Destroys the device when its owner is done with it, freeing every buffer made
+    /// on it at once. In the browser a dropped buffer is freed only when JavaScript's
+    /// garbage collector gets to it; a page that runs many reconstructions calls this
+    /// so that each run's GPU memory goes with it (the soak test measures it).
+    pub fn release(&self) {
+        self.lost.store(true, std::sync::atomic::Ordering::SeqCst);
+        self.device.destroy();
     }
 
     /// The first uncaught GPU error or device loss since the context was made.

@@ -9,7 +9,6 @@
 
 use super::readback::read_bytes;
 use super::{GpuContext, GpuError};
-use wgpu::util::DeviceExt;
 
 /// Key bits consumed per pass (256 digits).
 pub const BITS_PER_PASS: u32 = 8;
@@ -174,11 +173,13 @@ impl RadixSorter {
                 table[at..at + 16].copy_from_slice(bytemuck::cast_slice(&slot));
             }
         }
-        let params = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("radix_sort params"),
-            contents: &table,
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
+        let params = super::buffers::with_data(
+            ctx,
+            "radix_sort params",
+            &table,
+            wgpu::BufferUsages::UNIFORM,
+            16,
+        );
         let sorter = Self {
             count: pipeline("count"),
             scan_reduce: pipeline("scan_reduce"),
@@ -384,12 +385,7 @@ impl SortBuffers {
             | wgpu::BufferUsages::COPY_SRC
             | wgpu::BufferUsages::COPY_DST;
         let init = |label, data: &[u32]| {
-            ctx.device
-                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some(label),
-                    contents: bytemuck::cast_slice(data),
-                    usage,
-                })
+            super::buffers::with_data(ctx, label, bytemuck::cast_slice(data), usage, 4)
         };
         let empty = |label| {
             ctx.device.create_buffer(&wgpu::BufferDescriptor {

@@ -2,7 +2,6 @@
 
 use super::readback::read_f32;
 use super::{AccumStrategy, GpuContext, GpuError};
-use wgpu::util::DeviceExt;
 
 /// CPU oracle: `bins[index[i]] += values[i]`, in f64 so that ordering effects vanish.
 pub fn scatter_add_cpu(bins: usize, index: &[u32], values: &[f32]) -> Vec<f32> {
@@ -43,29 +42,24 @@ pub async fn scatter_add_gpu(
         cache: None,
     });
     let storage = wgpu::BufferUsages::STORAGE;
-    let accum = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("accum"),
-        contents: bytemuck::cast_slice(&vec![0.0f32; bins.max(1)]),
-        usage: storage | wgpu::BufferUsages::COPY_SRC,
-    });
-    let index_buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("index"),
-        contents: bytemuck::cast_slice(if index.is_empty() { &[0u32] } else { index }),
-        usage: storage,
-    });
-    let values_buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("values"),
-        contents: bytemuck::cast_slice(if values.is_empty() { &[0f32] } else { values }),
-        usage: storage,
-    });
+    let init = |label, data: &[u8], usage| super::buffers::with_data(ctx, label, data, usage, 4);
+    let accum = init(
+        "accum",
+        bytemuck::cast_slice(&vec![0.0f32; bins.max(1)]),
+        storage | wgpu::BufferUsages::COPY_SRC,
+    );
+    let index_buf = init("index", bytemuck::cast_slice(index), storage);
+    let values_buf = init("values", bytemuck::cast_slice(values), storage);
     let groups = (index.len() as u32).div_ceil(256);
     let (gx, gy) = ctx.dispatch_2d(groups);
     let params = [index.len() as u32, gx * 256, 0, 0];
-    let params_buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("params"),
-        contents: bytemuck::cast_slice(&params),
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
+    let params_buf = super::buffers::with_data(
+        ctx,
+        "params",
+        bytemuck::cast_slice(&params),
+        wgpu::BufferUsages::UNIFORM,
+        16,
+    );
     let bind = dev.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("scatter_add"),
         layout: &pipeline.get_bind_group_layout(0),

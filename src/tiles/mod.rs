@@ -292,8 +292,8 @@ pub struct TiledRun {
     pending: std::collections::VecDeque<(String, Vec<u8>)>,
     /// Hash of the manifest, the settings and the plan: checkpoints carry it.
     pub fingerprint: u64,
-    /// Fault injection for tests of failure and resume: the tile of this plan index
-    /// fails at its first step as a lost device would (`rogs reconstruct --fault-tile`).
+    /// Fault injection for tests of failure and resume: the GPU device is destroyed
+    /// as the tile of this plan index starts (`rogs reconstruct --fault-tile`).
     pub fault_tile: Option<usize>,
     /// The pose corrections between two tiles' sessions (each session holds them
     /// while it trains).
@@ -500,11 +500,10 @@ impl TiledRun {
                 continue;
             }
             if self.fault_tile.is_some() && self.fault_tile == self.started.checked_sub(1) {
+                // The injected fault is a real one: the device is destroyed and the
+                // step below fails as it would after a driver reset.
                 self.fault_tile = None;
-                let e = GpuError::Failed(
-                    "the device was lost (a fault injected by --fault-tile)".into(),
-                );
-                return Err(self.fail(e.into()));
+                self.ctx.lose();
             }
             let Some(s) = self.session.as_mut() else {
                 return Ok(None);
@@ -532,6 +531,12 @@ impl TiledRun {
     }
 
     fn fail(&mut self, e: ReconstructError) -> ReconstructError {
+        // Whatever failed first on a lost device (a read-back, a mapping), the cause
+        // to tell is the loss.
+        let e = match self.ctx.check() {
+            Err(lost) if self.ctx.is_lost() => ReconstructError::Gpu(lost),
+            _ => e,
+        };
         match self.current_tile() {
             Some((k, name)) => {
                 // Bad input fails again the same way: only the machine's failures retry.
@@ -834,9 +839,33 @@ impl TiledRun {
 
     /// After a tile failed for a reason of the machine (a lost device, not bad
     /// input): clears the failure so that the next `step` trains that tile again
-    /// from the start (the tiles finished before it are kept). False when there is
-    /// nothing to retry.
-    pub fn retry(&mut self) -> bool {
+    /// from the start (the tiles finished before it are kept). A lost device is
+    /// replaced by a new one first (the finished tiles are host data). False when
+    /// there is nothing to retry.
+    pub async fn retry(&mut self) -> Result<bool, ReconstructError> {
+        if self.failed_index.is_none() {
+            return Ok(false);
+        }
+        if self.ctx.is_lost() {
+            self.park_poses();
+            self.session = None;
+            self.ctx = GpuContext::new().await?;
+        }
+        Ok(self.retry_tile())
+    }
+
+    /// True once the run's GPU device is lost.
+    pub fn device_lost(&self) -> bool {
+        self.ctx.is_lost()
+    }
+
+    /// Frees the run's GPU memory at once (its device is destroyed): for an owner
+    /// that is done with the run (the page, before its next run).
+    pub fn release_gpu(&self) {
+        self.ctx.release();
+    }
+
+    fn retry_tile(&mut self) -> bool {
         let Some(k) = self.failed_index.take() else {
             return false;
         };

@@ -152,6 +152,14 @@ async fn start(
     })
 }
 
+/// Freed by the page (`free()`) before its next run: the run's device goes with it,
+/// and every GPU buffer on it, without waiting for JavaScript's garbage collector.
+impl Drop for Reconstruction {
+    fn drop(&mut self) {
+        self.run.release_gpu();
+    }
+}
+
 #[wasm_bindgen]
 impl Reconstruction {
     pub fn total_steps(&self) -> usize {
@@ -192,9 +200,15 @@ impl Reconstruction {
 
     /// After a step failed at a tile for a reason of the machine (a lost device, not
     /// bad input): clears it so that the next step trains that tile again, keeping
-    /// the finished ones. False when there is nothing to retry.
-    pub fn retry(&mut self) -> bool {
-        self.run.retry()
+    /// the finished ones, on a new GPU device if the old one was lost. Resolves to
+    /// false when there is nothing to retry.
+    pub async fn retry(&mut self) -> Result<bool, JsValue> {
+        self.run.retry().await.map_err(err)
+    }
+
+    /// True once the run's GPU device is lost (a `retry` gets a new one).
+    pub fn device_lost(&self) -> bool {
+        self.run.device_lost()
     }
 
     /// Renders the layers, scores them and prepares the export files; resolves to the

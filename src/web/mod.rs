@@ -125,6 +125,7 @@ pub async fn gpu_info() -> Result<JsValue, JsValue> {
         .await
         .map_err(|e| JsValue::from_str(&e.to_string()))?;
     let cpu = scatter_add_cpu(64, &index, &values);
+    ctx.release();
     if gpu.iter().zip(&cpu).any(|(a, b)| (a - b).abs() > 1e-3) {
         return Err(JsValue::from_str(
             "the GPU self-test gave wrong sums: this browser's WebGPU implementation is not usable",

@@ -37,15 +37,28 @@ export function useBrowser({ site = 'www' } = {}) {
   });
 }
 
-export async function openPage(query = '') {
+// `gpuAccounting`: counts the bytes of every GPU buffer the page creates, as held until
+// the buffer or its device is destroyed (window.gpuLiveBytes()): a garbage-collected
+// buffer counts as held, so the figure is an upper bound.
+export async function openPage(query = '', { gpuAccounting = false } = {}) {
   const page = await env.browser.newPage({ viewport: { width: 1100, height: 800 } });
   const errors = [];
   page.on('pageerror', (e) => errors.push(String(e)));
   const requests = [];
   page.on('request', (r) => requests.push(r.url()));
+  // Every Content-Security-Policy violation, as the page saw it.
+  await page.addInitScript(() => {
+    window.cspViolations = [];
+    document.addEventListener('securitypolicyviolation', (e) => window.cspViolations.push(`${e.effectiveDirective} ${e.blockedURI}`));
+  });
+  if (gpuAccounting) await page.addInitScript(gpuAccountingScript);
   await page.goto(`${env.base}/${query}`);
   await page.waitForSelector('body[data-gpu-checked="true"]', { timeout: 60_000 });
   return { page, errors, requests };
+}
+
+export async function cspViolations(page) {
+  return page.evaluate(() => window.cspViolations);
 }
 
 export async function drop(page, file, name = file) {
@@ -64,4 +77,36 @@ export async function dropMany(page, list) {
     return t;
   }, items);
   await page.dispatchEvent('body', 'drop', { dataTransfer: dt });
+}
+
+function gpuAccountingScript() {
+  const devices = [];
+  window.gpuLiveBytes = () => devices.filter((d) => !d.destroyed)
+    .reduce((n, d) => n + [...d.buffers.values()].reduce((a, b) => a + b, 0), 0);
+  window.gpuDevices = () => devices.filter((d) => !d.destroyed).length;
+  const request = GPUAdapter.prototype.requestDevice;
+  GPUAdapter.prototype.requestDevice = async function (...args) {
+    const device = await request.apply(this, args);
+    const rec = { buffers: new Map(), destroyed: false };
+    devices.push(rec);
+    device.accounting = rec;
+    return device;
+  };
+  const create = GPUDevice.prototype.createBuffer;
+  GPUDevice.prototype.createBuffer = function (desc) {
+    const b = create.call(this, desc);
+    this.accounting?.buffers.set(b, Number(desc.size));
+    b.accounting = this.accounting;
+    return b;
+  };
+  const destroyBuffer = GPUBuffer.prototype.destroy;
+  GPUBuffer.prototype.destroy = function () {
+    this.accounting?.buffers.delete(this);
+    return destroyBuffer.call(this);
+  };
+  const destroyDevice = GPUDevice.prototype.destroy;
+  GPUDevice.prototype.destroy = function () {
+    if (this.accounting) this.accounting.destroyed = true;
+    return destroyDevice.call(this);
+  };
 }

@@ -4,7 +4,7 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import path from 'node:path';
-import { env, useBrowser, openPage, drop, dropMany, fixtures, shots } from './harness.mjs';
+import { env, useBrowser, openPage, drop, dropMany, fixtures, shots, cspViolations } from './harness.mjs';
 
 useBrowser();
 
@@ -50,6 +50,42 @@ test('a dropped valid bundle shows its summary; an invalid one its named problem
   // No request leaves the page's own origin.
   assert.ok(requests.every((u) => u.startsWith(env.base)), requests.join('\n'));
   await page.close();
+});
+
+test('a Content-Security-Policy runs only the page\'s own code and connects only to its origin and the ?url= given', async () => {
+  const { page, errors, requests } = await openPage('?url=fixtures/valid.zip');
+  await page.waitForSelector('#summary:not([hidden])');
+  assert.deepEqual(await cspViolations(page), []);
+  assert.equal(await page.getAttribute('body', 'data-connect-src'), "connect-src 'self' blob:");
+  // Enforced, not only written: an injected inline script and a request to another
+  // origin (this server under another name; no-cors, which nothing but the policy
+  // stops) are refused.
+  const other = env.base.replace('127.0.0.1', 'localhost');
+  const r = await page.evaluate(async (other) => {
+    const s = document.createElement('script');
+    s.textContent = 'window.inlineRan = true';
+    document.head.append(s);
+    const inlineRan = window.inlineRan === true;
+    let fetched = false;
+    try { await fetch(`${other}/fixtures/valid.zip`, { mode: 'no-cors' }); fetched = true; } catch { /* refused */ }
+    return { inlineRan, fetched };
+  }, other);
+  assert.deepEqual(r, { inlineRan: false, fetched: false });
+  await page.waitForFunction(() => window.cspViolations.length >= 2);
+  const v = await cspViolations(page);
+  assert.ok(v.some((x) => x.startsWith('connect-src') && x.includes('localhost')), v.join('\n'));
+  assert.ok(v.some((x) => x.startsWith('script-src')), v.join('\n'));
+  assert.ok(requests.every((u) => u.startsWith(env.base)), requests.join('\n'));
+  assert.deepEqual(errors, []);
+  await page.close();
+
+  // A ?url= on another server is allowed, and only that server.
+  const o = await openPage(`?url=${other}/fixtures/valid.zip`);
+  await o.page.waitForSelector('#summary:not([hidden])');
+  assert.equal(await o.page.getAttribute('body', 'data-connect-src'), `connect-src 'self' blob: ${other}`);
+  assert.deepEqual(await cspViolations(o.page), []);
+  assert.ok(o.requests.every((u) => u.startsWith(env.base) || u.startsWith(other)), o.requests.join('\n'));
+  await o.page.close();
 });
 
 test('?url= loads a bundle from the server; a bad address is explained', async () => {

@@ -268,3 +268,41 @@ fn the_benchmarks_print_json_with_the_keys_scripts_compare() {
     }
     std::fs::remove_file(zip).ok();
 }
+
+/// A corridor far wider than the views see (36 m each side of a 2 m drive, a 25 cm
+/// truth map over a finer surfel grid): the map's 256-px chunks of 64 m listed
+/// 1.5 M surfels each (138 MiB, over lavapipe's 128 MiB binding) and the run failed
+/// at the end (exit 4). Chunks now shrink until they fit, and list only the surfels
+/// whose own footprint reaches them.
+#[test]
+fn a_corridor_wider_than_the_views_see_maps_in_chunks_that_fit() {
+    let bundle = temp("wide.zip");
+    let out = temp("wide-out");
+    assert!(rogs(&["example", "--out", bundle.to_str().unwrap()])
+        .status
+        .success());
+    let o = rogs(&[
+        "reconstruct",
+        bundle.to_str().unwrap(),
+        "--half-width",
+        "36",
+        "--epochs",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{err}");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).expect("report"))
+            .expect("json");
+    assert!(
+        report["metrics"]["psnr_db"]
+            .as_f64()
+            .is_some_and(|p| p > 15.0),
+        "{}",
+        report["metrics"]
+    );
+    std::fs::remove_dir_all(out).ok();
+    std::fs::remove_file(bundle).ok();
+}

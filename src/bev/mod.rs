@@ -9,6 +9,7 @@
 
 use crate::eval::BevRaster;
 use crate::gpu::{GpuContext, GpuError};
+use crate::render::candidates::Footprints;
 use crate::render::gpu::{GpuParams, GpuRasterizer};
 use crate::render::{CullConfig, Params, ViewCamera, EXTENT_SIGMA};
 
@@ -116,8 +117,14 @@ impl BevImage {
 
 /// The downward camera of the chunk whose top-left pixel is (c0, r0), for a model in
 /// the local frame (world − `origin`), hovering over elevation `z_mean` (local).
-fn chunk_camera(g: &BevGeometry, origin: [f64; 3], c0: u32, r0: u32, z_mean: f64) -> ViewCamera {
-    let half = CHUNK as f64 / 2.0;
+fn chunk_camera(
+    g: &BevGeometry,
+    origin: [f64; 3],
+    chunk: u32,
+    (c0, r0): (u32, u32),
+    z_mean: f64,
+) -> ViewCamera {
+    let half = chunk as f64 / 2.0;
     let xc = g.origin[0] + (c0 as f64 + half) * g.resolution - origin[0];
     let yc = g.origin[1] - (r0 as f64 + half) * g.resolution - origin[1];
     let zc = z_mean + HEIGHT_M;
@@ -133,8 +140,8 @@ fn chunk_camera(g: &BevGeometry, origin: [f64; 3], c0: u32, r0: u32, z_mean: f64
         fy: f,
         cx: half as f32,
         cy: half as f32,
-        width: CHUNK,
-        height: CHUNK,
+        width: chunk,
+        height: chunk,
         exposure: [0.0, 0.0],
     }
 }
@@ -158,40 +165,64 @@ pub async fn render(
     let ch = p.channels;
     let mut out = BevImage::blank(g.width, g.height, ch);
     // Mean elevation of the surfels in each chunk (chunks without any are skipped).
-    let (cw, chh) = (g.width.div_ceil(CHUNK), g.height.div_ceil(CHUNK));
-    let mut sums = vec![(0.0f64, 0usize); (cw * chh) as usize];
-    for q in &p.pos {
-        let col = ((q[0] as f64 + origin[0] - g.origin[0]) / g.resolution).floor();
-        let row = ((g.origin[1] - q[1] as f64 - origin[1]) / g.resolution).floor();
-        if col < 0.0 || row < 0.0 || col >= g.width as f64 || row >= g.height as f64 {
-            continue;
+    // A chunk is CHUNK pixels a side unless its surfels would not fit one GPU binding
+    // (a map coarser than the surfel grid: 256 px of 25 cm over a 3 cm grid held
+    // 1.76 M surfels): then halved until the densest one fits in half the binding.
+    let limit = ctx.limits.max_storage_buffer_binding_size as f64;
+    let per = crate::render::gpu::candidate_bytes(ch) as f64;
+    let mut chunk = CHUNK;
+    let (cw, sums) = loop {
+        let (cw, chh) = (g.width.div_ceil(chunk), g.height.div_ceil(chunk));
+        let mut sums = vec![(0.0f64, 0usize); (cw * chh) as usize];
+        for q in &p.pos {
+            let col = ((q[0] as f64 + origin[0] - g.origin[0]) / g.resolution).floor();
+            let row = ((g.origin[1] - q[1] as f64 - origin[1]) / g.resolution).floor();
+            if col < 0.0 || row < 0.0 || col >= g.width as f64 || row >= g.height as f64 {
+                continue;
+            }
+            let k = (row as u32 / chunk * cw + col as u32 / chunk) as usize;
+            sums[k].0 += q[2] as f64;
+            sums[k].1 += 1;
         }
-        let k = (row as u32 / CHUNK * cw + col as u32 / CHUNK) as usize;
-        sums[k].0 += q[2] as f64;
-        sums[k].1 += 1;
-    }
-    // A chunk lists only the surfels that can reach it: within its square widened by
-    // the largest surfel's ±3σ footprint (both axes), the low-pass floor's pixels and
-    // a metre for the parallax of relief seen from HEIGHT_M. Listing every surfel for
-    // every chunk needed a per-view buffer the size of the model (183 MiB at 5 cm on
-    // `nuscenes-like`, beyond lavapipe's 128 MiB binding).
-    let s_max = p
+        let densest = sums.iter().map(|s| s.1).max().unwrap_or(0) as f64;
+        let side = chunk as f64 * g.resolution;
+        let widened = ((side + 2.0 * (3.0 * g.resolution + 1.0)) / side).powi(2);
+        if !per_chunk || chunk <= 8 || densest * widened * per <= 0.5 * limit {
+            break (cw, sums);
+        }
+        chunk /= 2;
+    };
+    // A chunk lists only the surfels that can reach it: those whose own ±3σ
+    // footprint (both axes) reaches its square widened by the low-pass floor's
+    // pixels and a metre for the parallax of relief seen from HEIGHT_M. Listing every
+    // surfel for every chunk needed a per-view buffer the size of the model (183 MiB
+    // at 5 cm on `nuscenes-like`, beyond lavapipe's 128 MiB binding); widening the
+    // square by the largest surfel's reach did too on a model with a few surfels
+    // metres wide (a corridor far wider than the views see).
+    let reach: Vec<f32> = p
         .log_scale
         .iter()
-        .flatten()
-        .fold(f32::NEG_INFINITY, |m, &v| m.max(v))
-        .exp() as f64;
-    let reach = 2.0 * EXTENT_SIGMA * s_max + 3.0 * g.resolution + 1.0;
-    let half = if reach.is_finite() && per_chunk {
-        (CHUNK as f64 / 2.0 * g.resolution + reach) as f32
-    } else {
-        f32::INFINITY
+        .map(|s| {
+            let r = 2.0
+                * EXTENT_SIGMA as f32
+                * s.iter().fold(f32::NEG_INFINITY, |m, &v| m.max(v)).exp();
+            if r.is_finite() {
+                r
+            } else {
+                1e6
+            }
+        })
+        .collect();
+    let fp = Footprints {
+        reach: &reach,
+        half: (chunk as f64 / 2.0 * g.resolution + 3.0 * g.resolution + 1.0) as f32,
     };
+    // The box `project` applies on the GPU: depth only (the candidates did x and y).
     let cull = CullConfig {
         near: (HEIGHT_M - 200.0) as f32,
         far: (HEIGHT_M + 200.0) as f32,
-        half_width: half.min(1e6),
-        half_height: half,
+        half_width: 1e6,
+        half_height: f32::INFINITY,
     };
     let total = sums.iter().filter(|s| s.1 > 0).count();
     let mut done = 0;
@@ -199,15 +230,17 @@ pub async fn render(
         if count == 0 {
             continue;
         }
-        let (c0, r0) = ((k as u32 % cw) * CHUNK, (k as u32 / cw) * CHUNK);
+        let (c0, r0) = ((k as u32 % cw) * chunk, (k as u32 / cw) * chunk);
         let z_mean = sum / count as f64;
-        let cam = chunk_camera(g, origin, c0, r0, z_mean);
-        let f = raster.forward_map(ctx, gp, &cam, &cull).await?;
+        let cam = chunk_camera(g, origin, chunk, (c0, r0), z_mean);
+        let f = raster
+            .forward_map(ctx, gp, &cam, &cull, per_chunk.then_some(&fp))
+            .await?;
         let img = GpuRasterizer::read_image(ctx, &f).await?;
         let zc = z_mean + HEIGHT_M;
-        for y in 0..CHUNK.min(g.height - r0) {
-            for x in 0..CHUNK.min(g.width - c0) {
-                let s = (y * CHUNK + x) as usize;
+        for y in 0..chunk.min(g.height - r0) {
+            for x in 0..chunk.min(g.width - c0) {
+                let s = (y * chunk + x) as usize;
                 let d = ((r0 + y) * g.width + c0 + x) as usize;
                 let a = img.alpha[s];
                 out.alpha[d] = a;

@@ -146,7 +146,7 @@ pub async fn compare_step(
     let (vg, exp_g) = rasterize_backward::backward(&p0, &cam, &f, &og);
     let mut g = project_backward::backward(&p0, &cam, &vg);
     let w = reg.weights(&cfg.loss, true);
-    let cand0 = crate::render::candidates::candidates(&p0.pos, &cam, &cull);
+    let cand0 = crate::render::candidates::candidates(&p0.pos, &cam, &cull, None);
     let all: Vec<u32> = (0..n as u32).collect();
     // The surfels the regularisers cover: the candidates under selective Adam.
     let over = if selective { &cand0 } else { &all };
@@ -202,6 +202,7 @@ pub async fn compare_step(
                 &t.params.xyz,
                 view,
                 &cull,
+                None,
             ));
             t.step(view, 0, &target, mask).await.map_err(to_gpu)?;
             (grads, exp_grad) = t

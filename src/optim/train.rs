@@ -530,6 +530,7 @@ impl Trainer {
                 Some(target),
                 capacity,
                 crate::render::Compositing::Occlusion,
+                None,
             )
             .await?;
         let npx = cam.width * cam.height;

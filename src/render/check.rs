@@ -129,7 +129,7 @@ pub async fn compare_forward_average(ctx: &GpuContext) -> Result<f32, GpuError> 
     let oracle = super::rasterize::render_with(&p, &cam, &cull, super::Compositing::Average);
     let r = GpuRasterizer::new(ctx, ch as u32).await?;
     let gp = GpuRasterizer::upload(ctx, &p);
-    let f = r.forward_map(ctx, &gp, &cam, &cull).await?;
+    let f = r.forward_map(ctx, &gp, &cam, &cull, None).await?;
     let img = GpuRasterizer::read_image(ctx, &f).await?;
     let o = &oracle.image;
     Ok([

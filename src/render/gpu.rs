@@ -17,7 +17,7 @@
 //! The pair buffers are sized from the pair count, read back once per view (4 bytes)
 //! after the scan; every other count stays on the GPU.
 
-use super::candidates::candidates;
+use super::candidates::{candidates, Footprints};
 use super::project::tile_bits;
 use super::rasterize_backward::{OutputGrads, VIEW_GRAD};
 use super::{Compositing, CullConfig, Image, Params, ViewCamera, TILE};
@@ -35,6 +35,13 @@ const LOAD_SURFEL_WGSL: &str = include_str!("../../shaders/load_surfel.wgsl");
 pub const GUARD_WGSL: &str = include_str!("../../shaders/guard.wgsl");
 /// Floats per pixel of the packed forward outputs (`PIX_STRIDE` in view.wgsl).
 const PIX_STRIDE: usize = 10;
+
+/// Bytes per candidate surfel of a view's largest per-candidate buffer (the view
+/// gradients, or the projected surfel): a view's candidates times this must fit the
+/// adapter's binding limit.
+pub fn candidate_bytes(channels: usize) -> u64 {
+    4 * (24u64).max(VIEW_GRAD as u64 + channels as u64)
+}
 
 /// Bytes per pixel of a view's largest per-pixel buffer (the packed forward outputs,
 /// or the logits when there are more classes): one storage binding each, so a
@@ -289,19 +296,36 @@ impl GpuRasterizer {
         cam: &ViewCamera,
         cull: &CullConfig,
     ) -> Result<GpuForward, GpuError> {
-        self.forward_with(ctx, p, cam, cull, None, None, None, Compositing::Occlusion)
+        self.forward_plain(ctx, p, cam, cull, Compositing::Occlusion, None)
             .await
     }
 
-    /// The forward pass of the map's view from above (`Compositing::Average`).
+    /// The forward pass with neither exposure buffer, mask nor capacity.
+    async fn forward_plain(
+        &self,
+        ctx: &GpuContext,
+        p: &GpuParams,
+        cam: &ViewCamera,
+        cull: &CullConfig,
+        comp: Compositing,
+        fp: Option<&Footprints<'_>>,
+    ) -> Result<GpuForward, GpuError> {
+        let (e, m, c) = (None, None, None);
+        self.forward_with(ctx, p, cam, cull, e, m, c, comp, fp)
+            .await
+    }
+
+    /// The forward pass of the map's view from above (`Compositing::Average`); with
+    /// `fp`, the candidates are the surfels whose own footprint reaches the window.
     pub async fn forward_map(
         &self,
         ctx: &GpuContext,
         p: &GpuParams,
         cam: &ViewCamera,
         cull: &CullConfig,
+        fp: Option<&Footprints<'_>>,
     ) -> Result<GpuForward, GpuError> {
-        self.forward_with(ctx, p, cam, cull, None, None, None, Compositing::Average)
+        self.forward_plain(ctx, p, cam, cull, Compositing::Average, fp)
             .await
     }
 
@@ -314,7 +338,8 @@ impl GpuRasterizer {
     /// whole pass is encoded without waiting for the GPU: the caller compares `total`
     /// with the capacity afterwards (the kernels clamp to it, so an overflow gives a
     /// wrong image, never an out-of-bounds access). `comp` says how a pixel combines
-    /// its surfels (`Compositing`; the backward pass follows `Occlusion` only).
+    /// its surfels (`Compositing`; the backward pass follows `Occlusion` only). `fp`:
+    /// candidates by footprint (`Footprints`).
     #[allow(clippy::too_many_arguments)]
     pub async fn forward_with(
         &self,
@@ -326,6 +351,7 @@ impl GpuRasterizer {
         mask: Option<&wgpu::Buffer>,
         capacity: Option<u32>,
         comp: Compositing,
+        fp: Option<&Footprints<'_>>,
     ) -> Result<GpuForward, GpuError> {
         if p.channels != self.channels {
             return Err(GpuError::Failed(format!(
@@ -333,10 +359,10 @@ impl GpuRasterizer {
                 p.channels, self.channels
             )));
         }
-        let cand = candidates(&p.xyz, cam, cull);
+        let cand = candidates(&p.xyz, cam, cull, fp);
         let n = cand.len() as u32;
         let limit = ctx.limits.max_storage_buffer_binding_size;
-        let per = 4 * (24u64).max(VIEW_GRAD as u64 + p.channels as u64);
+        let per = candidate_bytes(p.channels as usize);
         if per * n as u64 > limit {
             return Err(GpuError::Validation(format!(
                 "{n} surfels in one view need {} MiB in one GPU buffer, but this adapter binds at most {} MiB: use a coarser grid (--resolution) or a shorter culling box",

@@ -8,6 +8,8 @@ pub mod bev;
 pub mod bundle;
 pub mod eval;
 pub mod export;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod fuzzing;
 pub mod gpu;
 pub mod grid;
 #[cfg(not(target_arch = "wasm32"))]

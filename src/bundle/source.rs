@@ -280,8 +280,16 @@ impl Source for ZipSource {
             .map_err(|_| unreadable("archive lock poisoned".into()))?;
         let f = a.by_name(path).map_err(|e| unreadable(e.to_string()))?;
         too_large(path, f.size(), limits)?;
-        // The declared size may lie: never inflate more than the limit.
-        let mut out = Vec::with_capacity(f.size().min(limits.max_file_bytes) as usize);
+        // The declared size may lie: never inflate more than the limit, and reserve
+        // no more than deflate can make of the stored bytes (1 032:1) nor 64 MiB up
+        // front (a damaged header declaring 4 GiB once reserved all of it; fuzzing
+        // found it). Past that the buffer grows with what really inflates.
+        let hint = f
+            .size()
+            .min(limits.max_file_bytes)
+            .min(f.compressed_size().saturating_mul(1032))
+            .min(64 << 20);
+        let mut out = Vec::with_capacity(hint as usize);
         f.take(limits.max_file_bytes + 1)
             .read_to_end(&mut out)
             .map_err(|e| unreadable(e.to_string()))?;

@@ -85,7 +85,12 @@ pub fn read_classes(path: &Path) -> Result<Vec<SemanticClass>, String> {
             path.display()
         )
     })?;
-    let classes: Vec<SemanticClass> = serde_json::from_slice(&text).map_err(|e| {
+    parse_classes(&text, path)
+}
+
+/// A class table from its bytes (`path` names it in errors).
+pub fn parse_classes(text: &[u8], path: &Path) -> Result<Vec<SemanticClass>, String> {
+    let classes: Vec<SemanticClass> = serde_json::from_slice(text).map_err(|e| {
         format!(
             "{}: not a class table ({e}); expected a JSON array of objects with \"id\" \
              (0-255), \"name\", \"color\" [r, g, b] and \"role\" (\"road\" or \"ignore\")",

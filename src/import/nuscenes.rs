@@ -10,7 +10,7 @@
 //! (gigabytes of JSON) need not fit in memory.
 
 mod labels;
-mod tables;
+pub mod tables;
 
 use super::{
     apply, header_dims, inverse, mul, read_file, resolve, rigid, ImportError, Imported, Output,

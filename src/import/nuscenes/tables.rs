@@ -92,7 +92,17 @@ pub fn read<T: DeserializeOwned>(
             path.display()
         )
     })?;
-    let mut de = serde_json::Deserializer::from_reader(BufReader::with_capacity(1 << 20, file));
+    parse(BufReader::with_capacity(1 << 20, file), &path, keep)
+}
+
+/// A table from `reader` (`path` names it in errors), keeping the records `keep`
+/// accepts: the others are never held.
+pub fn parse<T: DeserializeOwned>(
+    reader: impl std::io::Read,
+    path: &Path,
+    keep: impl FnMut(&T) -> bool,
+) -> Result<Vec<T>, String> {
+    let mut de = serde_json::Deserializer::from_reader(reader);
     let filter = Filter {
         keep,
         _t: PhantomData,

@@ -1,0 +1,5 @@
+//! `rogs::fuzzing::map_file`: any bytes, refused or read, never a panic.
+#![no_main]
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| rogs::fuzzing::map_file(data));

@@ -2,6 +2,7 @@
 //! (bad input; 2 is a usage error, 4 a machine that could not do it).
 #![cfg(not(target_arch = "wasm32"))]
 
+use std::path::PathBuf;
 use std::process::Command;
 
 fn rogs(args: &[&str]) -> std::process::Output {
@@ -269,6 +270,27 @@ fn the_benchmarks_print_json_with_the_keys_scripts_compare() {
     std::fs::remove_file(zip).ok();
 }
 
+/// `rogs reconstruct` of the tiny example with `extra` settings into a fresh folder:
+/// its output, stderr and the folder (removed by the caller).
+fn reconstruct_example(name: &str, extra: &[&str]) -> (std::process::Output, String, PathBuf) {
+    let bundle = temp(&format!("{name}.zip"));
+    let out = temp(&format!("{name}-out"));
+    assert!(rogs(&["example", "--out", bundle.to_str().unwrap()])
+        .status
+        .success());
+    let mut args = vec![
+        "reconstruct",
+        bundle.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    let o = rogs(&args);
+    std::fs::remove_file(bundle).ok();
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    (o, err, out)
+}
+
 /// A corridor far wider than the views see (36 m each side of a 2 m drive, a 25 cm
 /// truth map over a finer surfel grid): the map's 256-px chunks of 64 m listed
 /// 1.5 M surfels each (138 MiB, over lavapipe's 128 MiB binding) and the run failed
@@ -276,22 +298,7 @@ fn the_benchmarks_print_json_with_the_keys_scripts_compare() {
 /// whose own footprint reaches them.
 #[test]
 fn a_corridor_wider_than_the_views_see_maps_in_chunks_that_fit() {
-    let bundle = temp("wide.zip");
-    let out = temp("wide-out");
-    assert!(rogs(&["example", "--out", bundle.to_str().unwrap()])
-        .status
-        .success());
-    let o = rogs(&[
-        "reconstruct",
-        bundle.to_str().unwrap(),
-        "--half-width",
-        "36",
-        "--epochs",
-        "1",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    let err = String::from_utf8_lossy(&o.stderr);
+    let (o, err, out) = reconstruct_example("wide", &["--half-width", "36", "--epochs", "1"]);
     assert_eq!(o.status.code(), Some(0), "{err}");
     let report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("report.json")).expect("report"))
@@ -304,5 +311,30 @@ fn a_corridor_wider_than_the_views_see_maps_in_chunks_that_fit() {
         report["metrics"]
     );
     std::fs::remove_dir_all(out).ok();
-    std::fs::remove_file(bundle).ok();
+}
+
+/// A tile whose model cannot fit the adapter is refused before any tile trains (it
+/// was found only when that tile came up), naming the tile and advising smaller tiles.
+#[test]
+fn a_tile_too_large_for_the_gpu_is_refused_before_any_work() {
+    // 20 m each side at 5 mm: about 17 M surfels in each tile the 2 m drive touches,
+    // 16 bytes each in one binding, over lavapipe's 128 MiB.
+    let (o, err, out) = reconstruct_example(
+        "bigtile",
+        &[
+            "--tile-m",
+            "100",
+            "--half-width",
+            "20",
+            "--resolution",
+            "0.005",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(4), "{err}");
+    assert!(
+        err.contains("estimated before any work") && err.contains("--tile-m 50"),
+        "{err}"
+    );
+    assert!(!err.contains("step "), "no step ran: {err}");
+    std::fs::remove_dir_all(out).ok();
 }

@@ -88,6 +88,48 @@ pub fn estimated_surfels(m: &Manifest, cfg: &ReconstructConfig) -> f64 {
     len * 2.0 * g.half_width / (g.resolution * g.resolution)
 }
 
+/// The surfels of a tile's corridor, estimated before any work: the corridor's area
+/// inside `rect` (1 m cells whose centre is within `hw` of the trajectory `ground`;
+/// points over 50 m apart are taken as a gap, as between two drives) over a grid
+/// cell's. Refinement only adds surfels, so a tile over the adapter's limits by this
+/// count is refused before the first tile trains.
+pub fn estimated_tile_surfels(ground: &[[f64; 2]], rect: &Rect, hw: f64, res: f64) -> f64 {
+    const CELL: f64 = 1.0;
+    const GAP_M: f64 = 50.0;
+    let nx = ((rect.max[0] - rect.min[0]) / CELL).ceil().max(0.0) as usize;
+    let ny = ((rect.max[1] - rect.min[1]) / CELL).ceil().max(0.0) as usize;
+    let mut hit = vec![false; nx * ny];
+    let pairs = ground
+        .windows(2)
+        .map(|w| (w[0], w[1]))
+        .chain(ground.first().map(|&p| (p, p)));
+    for (a, b) in pairs {
+        let b = if dist2_segment(a, b, b) > GAP_M * GAP_M {
+            a
+        } else {
+            b
+        };
+        let cells = |lo: f64, hi: f64, min: f64, n: usize| {
+            let first = ((lo - hw - min) / CELL).floor().max(0.0) as usize;
+            let end = (((hi + hw - min) / CELL).ceil().max(0.0) as usize).min(n);
+            first..end
+        };
+        let xs = cells(a[0].min(b[0]), a[0].max(b[0]), rect.min[0], nx);
+        for j in cells(a[1].min(b[1]), a[1].max(b[1]), rect.min[1], ny) {
+            for i in xs.clone() {
+                let c = [
+                    rect.min[0] + (i as f64 + 0.5) * CELL,
+                    rect.min[1] + (j as f64 + 0.5) * CELL,
+                ];
+                if dist2_segment(c, a, b) <= hw * hw {
+                    hit[j * nx + i] = true;
+                }
+            }
+        }
+    }
+    hit.iter().filter(|&&h| h).count() as f64 * CELL * CELL / (res * res)
+}
+
 /// The tiling a run uses: the one asked for, else tiles of `DEFAULT_TILE_M` when the
 /// corridor is too large to map whole, else none.
 pub fn choose(
@@ -399,7 +441,30 @@ impl TiledRun {
                 let res = run.cfg.prepare.grid.resolution;
                 let hw = run.cfg.prepare.grid.half_width;
                 let pts = PosePlanes::from_manifest(&b.manifest).ground;
-                let corridor = BevGeometry::around(pts.iter().map(|g| [g[0], g[1]]), res, hw + res);
+                let ground: Vec<[f64; 2]> = pts.iter().map(|g| [g[0], g[1]]).collect();
+                // Every tile's model must fit the adapter: checked now, not when the
+                // tile comes up after hours of the others.
+                for tile in &run.tiles {
+                    let n = estimated_tile_surfels(&ground, &tile.rect, hw, res);
+                    crate::optim::train::check_fits(&run.ctx, n as usize, channels, 0).map_err(
+                        |e| {
+                            let why = match e {
+                                GpuError::Validation(s) => s,
+                                other => other.to_string(),
+                            };
+                            ReconstructError::Tile {
+                                tile: tile.name(),
+                                source: Box::new(ReconstructError::Gpu(GpuError::Validation(
+                                    format!(
+                                        "estimated before any work: {why}; or smaller tiles (--tile-m {:.0})",
+                                        t.size_m / 2.0
+                                    ),
+                                ))),
+                            }
+                        },
+                    )?;
+                }
+                let corridor = BevGeometry::around(ground.iter().copied(), res, hw + res);
                 run.geometry = match &run.truth {
                     Some(t) => BevGeometry::of_raster(t).covering(&corridor),
                     None => corridor,
@@ -1185,5 +1250,38 @@ fn append(model: &mut Params<f32>, p: &Params<f32>, keep: &[usize], shift: [f32;
         model
             .logits
             .extend_from_slice(&p.logits[k * ch..(k + 1) * ch]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Against the corridor's area by hand: a straight drive 16 m wide, a gap between
+    /// two drives left out, a tile the drive misses empty.
+    #[test]
+    fn a_tiles_surfels_are_its_corridor_area_over_a_cells() {
+        let line = |y: f64| (0..=100).map(move |x| [x as f64, y]);
+        let ground: Vec<[f64; 2]> = line(0.0).collect();
+        let rect = Rect {
+            min: [10.0, -50.0],
+            max: [60.0, 50.0],
+        };
+        let n = estimated_tile_surfels(&ground, &rect, 8.0, 0.5);
+        let exact = 50.0 * 16.0 / 0.25;
+        assert!((n / exact - 1.0).abs() < 0.07, "{n} against {exact}");
+        // A second drive 200 m north: the jump between the drives is no corridor.
+        let two: Vec<[f64; 2]> = line(0.0).chain(line(200.0)).collect();
+        let between = Rect {
+            min: [90.0, 50.0],
+            max: [110.0, 150.0],
+        };
+        assert_eq!(estimated_tile_surfels(&two, &between, 8.0, 0.5), 0.0);
+        let north = Rect {
+            min: [10.0, 150.0],
+            max: [60.0, 250.0],
+        };
+        let n2 = estimated_tile_surfels(&two, &north, 8.0, 0.5);
+        assert!((n2 / exact - 1.0).abs() < 0.07, "{n2} against {exact}");
     }
 }

@@ -18,11 +18,11 @@ pub fn storage(ctx: &GpuContext, label: &str, bytes: u64) -> wgpu::Buffer {
     })
 }
 
-/// A buffer of `usage` holding `data` (padded with zeros to at least `min` bytes and
-/// a multiple of `align`). Written through the queue rather than mapped at creation:
+/// A buffer of `usage` holding `data` (padded with zeros to at least 16 bytes and a
+/// multiple of `align`). Written through the queue rather than mapped at creation:
 /// on a lost device mapping fails (wgpu's `create_buffer_init` panics then), while a
 /// write is refused quietly and the loss is reported by `GpuContext::check`.
-pub fn with_data(
+fn with_data(
     ctx: &GpuContext,
     label: &str,
     data: &[u8],

@@ -240,9 +240,8 @@ impl GpuContext {
     /// (`--fault-tile`, the page's `?fault_tile=`). Every later use fails and
     /// `check()` says the device was lost.
     pub fn lose(&self) {
-        self.device.destroy();
         // Backends report the loss asynchronously (WebGPU's `lost` promise): say it now.
-        self.lost.store(true, std::sync::atomic::Ordering::SeqCst);
+        self.release();
         if let Ok(mut s) = self.failure.lock() {
             s.get_or_insert_with(|| {
                 "the GPU device was lost (destroyed); close other GPU-heavy pages or programs and try again"

@@ -173,13 +173,7 @@ impl RadixSorter {
                 table[at..at + 16].copy_from_slice(bytemuck::cast_slice(&slot));
             }
         }
-        let params = super::buffers::with_data(
-            ctx,
-            "radix_sort params",
-            &table,
-            wgpu::BufferUsages::UNIFORM,
-            16,
-        );
+        let params = super::buffers::uniform(ctx, "radix_sort params", &table);
         let sorter = Self {
             count: pipeline("count"),
             scan_reduce: pipeline("scan_reduce"),
@@ -385,7 +379,7 @@ impl SortBuffers {
             | wgpu::BufferUsages::COPY_SRC
             | wgpu::BufferUsages::COPY_DST;
         let init = |label, data: &[u32]| {
-            super::buffers::with_data(ctx, label, bytemuck::cast_slice(data), usage, 4)
+            super::buffers::init_storage(ctx, label, bytemuck::cast_slice(data))
         };
         let empty = |label| {
             ctx.device.create_buffer(&wgpu::BufferDescriptor {

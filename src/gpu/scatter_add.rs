@@ -1,5 +1,6 @@
 //! Host side of `shaders/scatter_add.wgsl` and its CPU oracle.
 
+use super::buffers::{init_storage, uniform};
 use super::readback::read_f32;
 use super::{AccumStrategy, GpuContext, GpuError};
 
@@ -41,25 +42,17 @@ pub async fn scatter_add_gpu(
         compilation_options: Default::default(),
         cache: None,
     });
-    let storage = wgpu::BufferUsages::STORAGE;
-    let init = |label, data: &[u8], usage| super::buffers::with_data(ctx, label, data, usage, 4);
-    let accum = init(
+    let accum = init_storage(
+        ctx,
         "accum",
         bytemuck::cast_slice(&vec![0.0f32; bins.max(1)]),
-        storage | wgpu::BufferUsages::COPY_SRC,
     );
-    let index_buf = init("index", bytemuck::cast_slice(index), storage);
-    let values_buf = init("values", bytemuck::cast_slice(values), storage);
+    let index_buf = init_storage(ctx, "index", bytemuck::cast_slice(index));
+    let values_buf = init_storage(ctx, "values", bytemuck::cast_slice(values));
     let groups = (index.len() as u32).div_ceil(256);
     let (gx, gy) = ctx.dispatch_2d(groups);
     let params = [index.len() as u32, gx * 256, 0, 0];
-    let params_buf = super::buffers::with_data(
-        ctx,
-        "params",
-        bytemuck::cast_slice(&params),
-        wgpu::BufferUsages::UNIFORM,
-        16,
-    );
+    let params_buf = uniform(ctx, "params", bytemuck::cast_slice(&params));
     let bind = dev.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("scatter_add"),
         layout: &pipeline.get_bind_group_layout(0),

@@ -3,11 +3,12 @@
 // by ?url= with range requests (a multi-GiB file cannot be dropped by a script).
 // Prints as JSON: the time to a checked bundle, the bytes read to open it, the time
 // to the first step, the wasm heap and the bundle bytes held at most while the
-// steps run (a tile's files), and the bytes read in all. ROGS_EAGER=1 reads the
+// steps run (a tile's files), the GPU buffers held at most, and the bytes read in all. ROGS_EAGER=1 reads the
 // bundle whole instead (it must be under 256 MiB), for a side-by-side figure. Build the wasm first
 // (bash scripts/build-wasm.sh).
 import fs from 'node:fs';
 import { openBench } from './bench-browser.mjs';
+import { gpuAccountingScript } from '../tests/page/gpu-accounting.mjs';
 
 const [bundle, steps = '40', resolution = '0.2', tileM = '96'] = process.argv.slice(2);
 if (!bundle) {
@@ -17,6 +18,12 @@ if (!bundle) {
 const { base, bundleUrl, browser, close } = await openBench(bundle);
 const size = fs.statSync(bundle).size;
 const page = await browser.newPage();
+// The GPU buffers the page holds (an upper bound: see gpu-accounting.mjs), sampled.
+await page.addInitScript(gpuAccountingScript);
+let gpuPeak = 0;
+const sampler = setInterval(async () => {
+  try { gpuPeak = Math.max(gpuPeak, await page.evaluate(() => window.gpuLiveBytes?.() || 0)); } catch { /* navigating */ }
+}, 250);
 let read = 0;
 page.on('response', async (r) => {
   if (r.url().includes('/bench/')) read += Number(r.headers()['content-length'] || 0);
@@ -48,8 +55,9 @@ const out = {
   first_step_s: firstStepS, steps: Number(steps), steps_s: stepsS,
   tiles: Number(await page.getAttribute('body', 'data-tiles')),
   held_peak_bytes: Number(await page.getAttribute('body', 'data-held-peak')),
-  wasm_heap_bytes: heap, bytes_read: read,
+  wasm_heap_bytes: heap, gpu_peak_bytes: gpuPeak, bytes_read: read,
   progress: await page.textContent('#progress-text'),
 };
+clearInterval(sampler);
 console.log(JSON.stringify(out, null, 2));
 await close();

@@ -269,6 +269,7 @@ impl Settings {
             Some(v) if v.is_finite() && v > 0.0 => Ok(Some(TileConfig {
                 size_m: v,
                 overlap_m,
+                origin_m: None,
             })),
             Some(v) => Err(format!(
                 "tile size {v} m: expected a positive number of metres, such as 64"

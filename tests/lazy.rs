@@ -46,6 +46,7 @@ fn cfg() -> ReconstructConfig {
 const TILES: Option<TileConfig> = Some(TileConfig {
     size_m: 16.0,
     overlap_m: 2.0,
+    origin_m: None,
 });
 
 fn eager(zip: Vec<u8>) -> Outcome {

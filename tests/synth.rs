@@ -457,12 +457,13 @@ fn long_drives_out_and_back_so_every_place_is_seen_on_two_passes() {
     let b = Bundle::from_zip_bytes(zip, Limits::default()).expect("valid bundle");
     let mut cfg = rogs::reconstruct::ReconstructConfig::default();
     cfg.prepare.grid.resolution = 0.2;
-    let tiles = rogs::tiles::plan(
+    let (_, tiles) = rogs::tiles::plan(
         &b,
         &cfg,
         &rogs::tiles::TileConfig {
             size_m: 16.0,
             overlap_m: 2.0,
+            origin_m: None,
         },
     );
     let both = tiles

@@ -84,6 +84,7 @@ fn a_tiled_map_matches_the_untiled_one_without_seams() {
     let t = TileConfig {
         size_m: 12.0,
         overlap_m: 4.0,
+        origin_m: None,
     };
     let (r, tiled) = run(&mut b, Some(t));
     let trained = r.reports.iter().filter(|t| t.steps > 0).count();
@@ -130,7 +131,7 @@ fn a_tiled_map_matches_the_untiled_one_without_seams() {
         tiled.metrics.clone().unwrap(),
     );
     eprintln!("untiled {mu:?}\ntiled   {mt:?}");
-    // Measured: coverage 0.9998, |dz| 0.28 cm, 31.4 dB, classes 0.990 (two
+    // Measured: coverage 0.9997, |dz| 0.25 cm, 44.1 dB, classes 0.997 (two
     // optimisations of the same views, tiles with their own exposure and schedule).
     assert!(cov > 0.98, "coverage IoU {cov}");
     assert!(dz < 0.015, "mean elevation difference {dz} m");
@@ -146,10 +147,11 @@ fn a_tiled_map_matches_the_untiled_one_without_seams() {
 
     // Seams: the steps between neighbouring pixels across tile borders, against the
     // same lines of the untiled map (the borders may fall on paint or a kerb) and
-    // against lines inside tiles. Measured: elevation 1.24 mm tiled, 1.18 mm untiled;
-    // colour 0.0247 tiled, 0.0233 untiled.
-    let s = seams(&tiled.raster, t.size_m);
-    let su = seams(&untiled.raster, t.size_m);
+    // against lines inside tiles. Measured: elevation 2.32 mm tiled, 2.24 mm untiled;
+    // colour 0.0243 tiled, 0.0244 untiled.
+    let settled = r.tiling.expect("tiled");
+    let s = seams(&tiled.raster, &settled);
+    let su = seams(&untiled.raster, &settled);
     eprintln!("seams tiled {s:?}\nseams untiled {su:?}");
     assert!(s.border_pairs > 100 && s.inside_pairs > 100, "{s:?}");
     assert!(
@@ -160,9 +162,13 @@ fn a_tiled_map_matches_the_untiled_one_without_seams() {
         s.border_rgb_step < 1.25 * su.border_rgb_step + 0.002,
         "colour seam {s:?} (untiled {su:?})"
     );
+    // Borders against lines inside tiles, relative to the same ratio on the untiled
+    // map (the scene's own relief decides where lines fall on kerbs): measured 2.03
+    // tiled, 2.04 untiled.
+    let ratio = |s: &rogs::tiles::Seams| s.border_elevation_step_m / s.inside_elevation_step_m;
     assert!(
-        s.border_elevation_step_m < 2.0 * s.inside_elevation_step_m,
-        "elevation steps at borders {s:?}"
+        ratio(&s) < 1.25 * ratio(&su),
+        "elevation steps at borders {s:?} (untiled {su:?})"
     );
     let report = r.report(&b, &tiled, "demo");
     assert_eq!(
@@ -181,8 +187,9 @@ fn every_planned_tile_is_seen_and_views_that_see_two_tiles_train_both() {
     let t = TileConfig {
         size_m: 12.0,
         overlap_m: 4.0,
+        origin_m: None,
     };
-    let tiles = plan(&b, &cfg(), &t);
+    let (_, tiles) = plan(&b, &cfg(), &t);
     assert!(tiles.len() >= 4);
     let views: usize = m.frames.iter().map(|f| f.views.len()).sum();
     let planned: usize = tiles.iter().map(|t| t.views.len()).sum();
@@ -431,6 +438,7 @@ fn a_map_too_large_for_whole_layers_streams_block_by_block_into_the_same_map_fil
     let t = TileConfig {
         size_m: 12.0,
         overlap_m: 2.0,
+        origin_m: None,
     };
     // Without streaming (the page), the same map is refused before any work.
     let e = match pollster::block_on(TiledRun::new(&mut b, cfg.clone(), Some(t), ctx())) {
@@ -510,7 +518,7 @@ fn a_map_too_large_for_whole_layers_streams_block_by_block_into_the_same_map_fil
     assert_eq!(ms.elevation_rmse_m, mw.elevation_rmse_m);
     let (bs, bw) = (
         s.report["seams"]["border_pairs"].as_u64().unwrap_or(0),
-        seams(&o.raster, t.size_m).border_pairs as u64,
+        seams(&o.raster, &r.tiling.expect("tiled")).border_pairs as u64,
     );
     assert!(bs > 0 && bs <= bw, "seam pairs streamed {bs}, whole {bw}");
 }
@@ -521,6 +529,7 @@ fn a_failed_tile_keeps_the_finished_ones_and_the_run_resumes_from_checkpoints() 
     let t = TileConfig {
         size_m: 12.0,
         overlap_m: 4.0,
+        origin_m: None,
     };
     // Run A: tile 2 fails (a lost device, injected); tiles 0 and 1 are kept and
     // checkpointed. Then A retries the failed tile and finishes: the reference map.

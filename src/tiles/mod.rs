@@ -62,6 +62,10 @@ pub struct TileConfig {
     /// Each tile also trains this many metres beyond its core on every side; the
     /// layers are blended over twice this width.
     pub overlap_m: f64,
+    /// Where the lattice of cores starts (world xy, metres): tile (i, j)'s core is
+    /// `origin + [i, j]·size_m`. `None` until a plan settles it (`lattice_origin`).
+    #[serde(default)]
+    pub origin_m: Option<[f64; 2]>,
 }
 
 impl Default for TileConfig {
@@ -69,6 +73,7 @@ impl Default for TileConfig {
         Self {
             size_m: DEFAULT_TILE_M,
             overlap_m: DEFAULT_OVERLAP_M,
+            origin_m: None,
         }
     }
 }
@@ -141,79 +146,50 @@ pub fn choose(
 }
 
 /// Cuts the bundle's corridor into tiles, each with the views that see it, in the
-/// order the drive first sees them. Tiles no view sees are left out.
-pub fn plan(b: &Bundle, cfg: &ReconstructConfig, t: &TileConfig) -> Vec<Tile> {
+/// order the drive first sees them. Tiles no view sees are left out. Returns the
+/// tiling with its lattice's origin settled (`t.origin_m`, else the one of
+/// `lattice_origin`).
+pub fn plan(b: &Bundle, cfg: &ReconstructConfig, t: &TileConfig) -> (TileConfig, Vec<Tile>) {
     let m = &b.manifest;
     let planes = PosePlanes::from_manifest(m);
-    let hw = cfg.prepare.grid.half_width;
-    let cull = &cfg.train.cull;
-    let far = cull.far as f64;
+    let far = cfg.train.cull.far as f64;
     let size = t.size_m.max(1.0);
-    let cell = |v: f64| (v / size).floor() as i64;
-    // Segments of each drive's ground path, bucketed by the tiles whose rect they
-    // may reach (so the plan costs the corridor's length, not tiles × segments).
-    let mut buckets: std::collections::BTreeMap<[i64; 2], Vec<Segment>> = Default::default();
-    let reach = hw + t.overlap_m;
-    for d in &b.drives {
-        let g = &planes.ground[d.frames.clone()];
-        for w in g.windows(2) {
-            let (a, c) = ([w[0][0], w[0][1]], [w[1][0], w[1][1]]);
-            for i in cell(a[0].min(c[0]) - reach)..=cell(a[0].max(c[0]) + reach) {
-                for j in cell(a[1].min(c[1]) - reach)..=cell(a[1].max(c[1]) + reach) {
-                    buckets.entry([i, j]).or_default().push((a, c));
-                }
-            }
-        }
-        if g.len() == 1 {
-            let a = [g[0][0], g[0][1]];
-            buckets
-                .entry([cell(a[0]), cell(a[1])])
-                .or_default()
-                .push((a, a));
+    let seen = seen_corridor(b, cfg, &planes);
+    let origin = t
+        .origin_m
+        .unwrap_or_else(|| lattice_origin(&seen, size, t.overlap_m));
+    let tiling = TileConfig {
+        origin_m: Some(origin),
+        ..*t
+    };
+    let mut cells: std::collections::BTreeMap<[i64; 2], Vec<(usize, usize)>> = Default::default();
+    for (view, pts) in &seen {
+        for id in cells_of(pts, origin, size, t.overlap_m) {
+            cells.entry(id).or_default().push(*view);
         }
     }
     let mut tiles = Vec::new();
-    for (id, segs) in buckets {
+    for (id, mut views) in cells {
         let core = Rect {
-            min: [id[0] as f64 * size, id[1] as f64 * size],
-            max: [(id[0] + 1) as f64 * size, (id[1] + 1) as f64 * size],
+            min: [
+                origin[0] + id[0] as f64 * size,
+                origin[1] + id[1] as f64 * size,
+            ],
+            max: [
+                origin[0] + (id[0] + 1) as f64 * size,
+                origin[1] + (id[1] + 1) as f64 * size,
+            ],
         };
         let rect = core.grow(t.overlap_m);
-        // Sample the corridor inside the rect on a lattice of ≤ 1 m.
-        let step = (hw / 2.0).clamp(0.25, 1.0);
-        let nx = ((rect.max[0] - rect.min[0]) / step).ceil() as usize;
-        let ny = ((rect.max[1] - rect.min[1]) / step).ceil() as usize;
-        let mut samples = Vec::new();
-        for iy in 0..ny {
-            for ix in 0..nx {
-                let p = [
-                    rect.min[0] + (ix as f64 + 0.5) * step,
-                    rect.min[1] + (iy as f64 + 0.5) * step,
-                ];
-                if segs.iter().any(|&(a, c)| dist2_segment(p, a, c) <= hw * hw) {
-                    samples.push(p);
-                }
-            }
-        }
-        if samples.is_empty() {
-            continue;
-        }
         let mut near_frames = vec![false; m.frames.len()];
-        let mut views = Vec::new();
         let mut near_xy = Vec::new();
-        for (f, fr) in m.frames.iter().enumerate() {
-            let g = planes.ground[f];
-            if rect.dist2([g[0], g[1]]) > (far + 5.0).powi(2) {
-                continue;
-            }
-            near_frames[f] = true;
-            near_xy.push(frame_xy(m, f));
-            for v in 0..fr.views.len() {
-                if sees(m, f, v, g, &samples, cull) {
-                    views.push((f, v));
-                }
+        for (f, g) in planes.ground.iter().enumerate() {
+            if rect.dist2([g[0], g[1]]) <= (far + 5.0).powi(2) {
+                near_frames[f] = true;
+                near_xy.push(frame_xy(m, f));
             }
         }
+        views.retain(|&(f, _)| near_frames[f]);
         if views.is_empty() {
             continue;
         }
@@ -227,39 +203,146 @@ pub fn plan(b: &Bundle, cfg: &ReconstructConfig, t: &TileConfig) -> Vec<Tile> {
         });
     }
     tiles.sort_by_key(|t| (t.views[0], t.id));
-    tiles
+    (tiling, tiles)
 }
 
-/// A segment of a drive's ground path (xy ends).
-type Segment = ([f64; 2], [f64; 2]);
+/// Every view (frame, view), in order, with the corridor's ground samples it sees:
+/// points on a lattice of at most 1 m within the half-width of any drive's ground
+/// path.
+fn seen_corridor(
+    b: &Bundle,
+    cfg: &ReconstructConfig,
+    planes: &PosePlanes,
+) -> Vec<((usize, usize), Vec<[f64; 2]>)> {
+    let m = &b.manifest;
+    let hw = cfg.prepare.grid.half_width;
+    let cull = &cfg.train.cull;
+    let step = (hw / 2.0).clamp(0.25, 1.0);
+    // The samples, bucketed in squares of `BUCKET` metres.
+    const BUCKET: f64 = 16.0;
+    let key = |p: [f64; 2]| {
+        [
+            (p[0] / BUCKET).floor() as i64,
+            (p[1] / BUCKET).floor() as i64,
+        ]
+    };
+    let mut lattice = std::collections::BTreeSet::new();
+    for d in &b.drives {
+        let g = &planes.ground[d.frames.clone()];
+        let ends = |k: usize| [g[k][0], g[k][1]];
+        let segs = (0..g.len().saturating_sub(1)).map(|k| (ends(k), ends(k + 1)));
+        let single = (g.len() == 1).then(|| (ends(0), ends(0)));
+        for (a, c) in segs.chain(single) {
+            let lo = |k: usize| ((a[k].min(c[k]) - hw) / step).floor() as i64;
+            let hi = |k: usize| ((a[k].max(c[k]) + hw) / step).ceil() as i64;
+            for i in lo(0)..=hi(0) {
+                for j in lo(1)..=hi(1) {
+                    let p = [(i as f64 + 0.5) * step, (j as f64 + 0.5) * step];
+                    if dist2_segment(p, a, c) <= hw * hw {
+                        lattice.insert([i, j]);
+                    }
+                }
+            }
+        }
+    }
+    let mut buckets: std::collections::BTreeMap<[i64; 2], Vec<[f64; 2]>> = Default::default();
+    for [i, j] in lattice {
+        let p = [(i as f64 + 0.5) * step, (j as f64 + 0.5) * step];
+        buckets.entry(key(p)).or_default().push(p);
+    }
+    // A view sees no farther than its culling box's far corner.
+    let reach = (cull.far as f64).hypot(cull.half_width.min(cull.far) as f64) + 5.0;
+    let r = (reach / BUCKET).ceil() as i64;
+    let mut seen = Vec::new();
+    for (f, fr) in m.frames.iter().enumerate() {
+        let g = planes.ground[f];
+        let k = key([g[0], g[1]]);
+        let near: Vec<[f64; 2]> = (k[0] - r..=k[0] + r)
+            .flat_map(|i| (k[1] - r..=k[1] + r).map(move |j| [i, j]))
+            .filter_map(|c| buckets.get(&c))
+            .flatten()
+            .copied()
+            .filter(|p| (p[0] - g[0]).hypot(p[1] - g[1]) <= reach)
+            .collect();
+        for v in 0..fr.views.len() {
+            seen.push(((f, v), seen_by(m, f, v, g, &near, cull)));
+        }
+    }
+    seen
+}
 
-/// Whether view `v` of frame `f` sees any of the ground samples (at the frame's
-/// ground height): inside the rasteriser's culling box and within the image, with a
-/// 10 % margin for relief.
-fn sees(
+/// The lattice cells whose rect (the core widened by `overlap`) holds any of `pts`.
+fn cells_of(pts: &[[f64; 2]], origin: [f64; 2], size: f64, overlap: f64) -> Vec<[i64; 2]> {
+    let span = |v: f64, o: f64| {
+        ((v - o - overlap) / size).floor() as i64..=((v - o + overlap) / size).floor() as i64
+    };
+    let mut cells = Vec::new();
+    for p in pts {
+        for i in span(p[0], origin[0]) {
+            for j in span(p[1], origin[1]) {
+                cells.push([i, j]);
+            }
+        }
+    }
+    cells.sort_unstable();
+    cells.dedup();
+    cells
+}
+
+/// Where the tile lattice starts: of the origins on a quarter-tile lattice, the one
+/// whose tiles make the fewest (view, tile) pairs, i.e. the fewest steps. A road that
+/// runs along a lattice line would otherwise be trained twice by every view that sees
+/// it, once in the tile on each side (`long` at 500 m: 2.4 tiles per view).
+pub fn lattice_origin(
+    seen: &[((usize, usize), Vec<[f64; 2]>)],
+    size: f64,
+    overlap: f64,
+) -> [f64; 2] {
+    let mut best = ([0.0, 0.0], usize::MAX);
+    for k in 0..16 {
+        let o = [(k % 4) as f64 * size / 4.0, (k / 4) as f64 * size / 4.0];
+        let pairs: usize = seen
+            .iter()
+            .map(|(_, pts)| cells_of(pts, o, size, overlap).len())
+            .sum();
+        if pairs < best.1 {
+            best = (o, pairs);
+        }
+    }
+    best.0
+}
+
+/// The ground samples (at the frame's ground height) view `v` of frame `f` sees:
+/// inside the rasteriser's culling box and within the image, with a 10 % margin for
+/// relief.
+fn seen_by(
     m: &Manifest,
     f: usize,
     v: usize,
     ground: [f64; 3],
     samples: &[[f64; 2]],
     cull: &crate::render::CullConfig,
-) -> bool {
+) -> Vec<[f64; 2]> {
     let Some(cam) = view_camera(m, f, v, ground, [0.0, 0.0]) else {
-        return false;
+        return Vec::new();
     };
     let w = &cam.world_to_cam;
     let (mw, mh) = (0.1 * cam.width as f32, 0.1 * cam.height as f32);
-    samples.iter().any(|s| {
-        let p = [(s[0] - ground[0]) as f32, (s[1] - ground[1]) as f32, 0.0f32];
-        let c = |r: usize| w[r][0] * p[0] + w[r][1] * p[1] + w[r][2] * p[2] + w[r][3];
-        let (x, y, z) = (c(0), c(1), c(2));
-        if !(z >= cull.near && z <= cull.far && x.abs() <= cull.half_width) {
-            return false;
-        }
-        let u = cam.fx * x / z + cam.cx;
-        let vv = cam.fy * y / z + cam.cy;
-        u >= -mw && u <= cam.width as f32 + mw && vv >= -mh && vv <= cam.height as f32 + mh
-    })
+    samples
+        .iter()
+        .copied()
+        .filter(|s| {
+            let p = [(s[0] - ground[0]) as f32, (s[1] - ground[1]) as f32, 0.0f32];
+            let c = |r: usize| w[r][0] * p[0] + w[r][1] * p[1] + w[r][2] * p[2] + w[r][3];
+            let (x, y, z) = (c(0), c(1), c(2));
+            if !(z >= cull.near && z <= cull.far && x.abs() <= cull.half_width) {
+                return false;
+            }
+            let u = cam.fx * x / z + cam.cx;
+            let vv = cam.fy * y / z + cam.cy;
+            u >= -mw && u <= cam.width as f32 + mw && vv >= -mh && vv <= cam.height as f32 + mh
+        })
+        .collect()
 }
 
 /// What one tile did (report.json's `tiles`).
@@ -433,7 +516,9 @@ impl TiledRun {
                 run.started = 1;
             }
             Some(t) => {
-                run.tiles = plan(b, &run.cfg, &t);
+                let (t, tiles) = plan(b, &run.cfg, &t);
+                run.tiling = Some(t);
+                run.tiles = tiles;
                 if run.tiles.is_empty() {
                     return Err(ReconstructError::NoViews);
                 }
@@ -1130,7 +1215,7 @@ impl TiledRun {
             .unwrap_or_default();
             r["stopped"] = serde_json::to_value(&self.failed).unwrap_or_default();
             if let Some(t) = self.tiling {
-                r["seams"] = serde_json::to_value(seams(&o.raster, t.size_m)).unwrap_or_default();
+                r["seams"] = serde_json::to_value(seams(&o.raster, &t)).unwrap_or_default();
             }
         }
         r
@@ -1151,10 +1236,10 @@ pub struct Seams {
     pub inside_rgb_step: f64,
 }
 
-/// The seam statistics of a map raster cut by tiles of `tile_m` metres.
-pub fn seams(r: &BevRaster, tile_m: f64) -> Seams {
+/// The seam statistics of a map raster cut by the tiles of `t`.
+pub fn seams(r: &BevRaster, t: &TileConfig) -> Seams {
     let mut s = SeamSums::default();
-    s.add(r, tile_m);
+    s.add(r, t);
     s.seams()
 }
 
@@ -1168,8 +1253,10 @@ pub struct SeamSums {
 }
 
 impl SeamSums {
-    pub fn add(&mut self, r: &BevRaster, tile_m: f64) {
+    pub fn add(&mut self, r: &BevRaster, t: &TileConfig) {
         let acc = &mut self.acc;
+        let half = t.size_m / 2.0;
+        let o = t.origin_m.unwrap_or_default();
         let res = r.resolution;
         let mut pair = |kind: usize, a: (u32, u32), b: (u32, u32)| {
             if !(r.is_valid(a.0, a.1) && r.is_valid(b.0, b.1)) {
@@ -1186,15 +1273,15 @@ impl SeamSums {
             acc[kind].2 += dc;
         };
         // Which line class, if any, passes between pixel centres at world u and u + res.
-        let kind_between = |u: f64| -> Option<usize> {
-            let k0 = ((u) / (tile_m / 2.0)).floor();
-            let k1 = ((u + res) / (tile_m / 2.0)).floor();
+        let kind_between = |u: f64, o: f64| -> Option<usize> {
+            let k0 = ((u - o) / half).floor();
+            let k1 = ((u + res - o) / half).floor();
             (k1 > k0).then(|| (k1.rem_euclid(2.0) != 0.0) as usize)
         };
         for row in 0..r.height {
             for col in 0..r.width.saturating_sub(1) {
                 let x = r.origin[0] + (col as f64 + 0.5) * res;
-                if let Some(k) = kind_between(x) {
+                if let Some(k) = kind_between(x, o[0]) {
                     pair(k, (col, row), (col + 1, row));
                 }
             }
@@ -1202,7 +1289,7 @@ impl SeamSums {
         for row in 0..r.height.saturating_sub(1) {
             // Row + 1 lies south: its y is smaller.
             let y = r.origin[1] - (row as f64 + 1.5) * res;
-            if let Some(k) = kind_between(y) {
+            if let Some(k) = kind_between(y, o[1]) {
                 for col in 0..r.width {
                     pair(k, (col, row + 1), (col, row));
                 }
@@ -1256,6 +1343,37 @@ fn append(model: &mut Params<f32>, p: &Params<f32>, keep: &[usize], shift: [f32;
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A road along the world's x axis: with the lattice at the origin every view sees
+    /// the tiles on both sides of the y = 0 line; the chosen origin puts the road
+    /// inside one row of tiles and halves the pairs.
+    #[test]
+    fn the_lattice_keeps_a_road_off_its_lines() {
+        let seen: Vec<((usize, usize), Vec<[f64; 2]>)> = (0..200)
+            .map(|f| {
+                let x0 = f as f64;
+                let pts = (0..20)
+                    .flat_map(|d| (-4..=4).map(move |y| [x0 + 1.0 + d as f64, y as f64]))
+                    .collect();
+                ((f, 0), pts)
+            })
+            .collect();
+        let pairs = |o: [f64; 2]| -> usize {
+            seen.iter()
+                .map(|(_, p)| cells_of(p, o, 96.0, 4.0).len())
+                .sum()
+        };
+        let o = lattice_origin(&seen, 96.0, 4.0);
+        assert_ne!(o[1], 0.0, "{o:?}");
+        assert!(
+            2 * pairs(o) <= pairs([0.0, 0.0]) + 200,
+            "{} pairs at {o:?}, {} at the origin",
+            pairs(o),
+            pairs([0.0, 0.0])
+        );
+        // Every view sees at least one tile, whatever the origin.
+        assert!(pairs(o) >= seen.len());
+    }
 
     /// Against the corridor's area by hand: a straight drive 16 m wide, a gap between
     /// two drives left out, a tile the drive misses empty.

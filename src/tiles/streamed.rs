@@ -105,7 +105,7 @@ impl TiledRun {
                 tally.add(&o.raster, t);
             }
             if let Some(c) = self.tiling {
-                seams.add(&o.raster, c.size_m);
+                seams.add(&o.raster, &c);
             }
         }
         let range = if lo > hi { (0.0, 1.0) } else { (lo, hi) };

@@ -6,6 +6,7 @@ import fs from 'node:fs';
 import path from 'node:path';
 import { chromium } from 'playwright-core';
 import { createServer } from '../../scripts/serve.mjs';
+import { gpuAccountingScript } from './gpu-accounting.mjs';
 
 export const root = path.resolve(import.meta.dirname, '../..');
 export const fixtures = path.join(root, 'target/page-fixtures');
@@ -77,36 +78,4 @@ export async function dropMany(page, list) {
     return t;
   }, items);
   await page.dispatchEvent('body', 'drop', { dataTransfer: dt });
-}
-
-function gpuAccountingScript() {
-  const devices = [];
-  window.gpuLiveBytes = () => devices.filter((d) => !d.destroyed)
-    .reduce((n, d) => n + [...d.buffers.values()].reduce((a, b) => a + b, 0), 0);
-  window.gpuDevices = () => devices.filter((d) => !d.destroyed).length;
-  const request = GPUAdapter.prototype.requestDevice;
-  GPUAdapter.prototype.requestDevice = async function (...args) {
-    const device = await request.apply(this, args);
-    const rec = { buffers: new Map(), destroyed: false };
-    devices.push(rec);
-    device.accounting = rec;
-    return device;
-  };
-  const create = GPUDevice.prototype.createBuffer;
-  GPUDevice.prototype.createBuffer = function (desc) {
-    const b = create.call(this, desc);
-    this.accounting?.buffers.set(b, Number(desc.size));
-    b.accounting = this.accounting;
-    return b;
-  };
-  const destroyBuffer = GPUBuffer.prototype.destroy;
-  GPUBuffer.prototype.destroy = function () {
-    this.accounting?.buffers.delete(this);
-    return destroyBuffer.call(this);
-  };
-  const destroyDevice = GPUDevice.prototype.destroy;
-  GPUDevice.prototype.destroy = function () {
-    if (this.accounting) this.accounting.destroyed = true;
-    return destroyDevice.call(this);
-  };
 }

@@ -18,17 +18,31 @@ if (!bundle) {
 const { base, bundleUrl, browser, close } = await openBench(bundle);
 const size = fs.statSync(bundle).size;
 const page = await browser.newPage();
+const t0 = Date.now();
 // The GPU buffers the page holds (an upper bound: see gpu-accounting.mjs), sampled.
 await page.addInitScript(gpuAccountingScript);
+// Whole stacks in a panic's message.
+await page.addInitScript(() => { Error.stackTraceLimit = 60; });
 let gpuPeak = 0;
+let heapPeak = 0;
+let said = '';
 const sampler = setInterval(async () => {
-  try { gpuPeak = Math.max(gpuPeak, await page.evaluate(() => window.gpuLiveBytes?.() || 0)); } catch { /* navigating */ }
+  try {
+    const [g, h, text] = await page.evaluate(async () => [window.gpuLiveBytes?.() || 0,
+      (await import('/pkg/rogs.js')).wasm_memory_bytes?.() || 0,
+      `${document.getElementById('status')?.textContent} | ${document.getElementById('progress-text')?.textContent}`]);
+    (gpuPeak = Math.max(gpuPeak, g)), (heapPeak = Math.max(heapPeak, h));
+    // What the page says, on stderr as it changes (a crash's last words).
+    if (text !== said) console.error(`${((Date.now() - t0) / 1000).toFixed(1)} s: ${(said = text)} (heap ${(h / 2 ** 20).toFixed(0)} MiB, GPU ${(g / 2 ** 20).toFixed(0)} MiB)`);
+  } catch { /* navigating */ }
 }, 250);
+page.on('crash', () => console.error('the page crashed (renderer gone)'));
+page.on('pageerror', (e) => console.error(`page error: ${e}`));
+page.on('console', (m) => m.type() === 'error' && console.error(`console: ${m.text()}`));
 let read = 0;
 page.on('response', async (r) => {
   if (r.url().includes('/bench/')) read += Number(r.headers()['content-length'] || 0);
 });
-const t0 = Date.now();
 // ROGS_EAGER=1: the same run reading the bundle whole, for comparison.
 const eager = process.env.ROGS_EAGER === '1';
 await page.goto(`${base}/?url=${bundleUrl}${eager ? '' : '&lazy=1'}`);
@@ -55,7 +69,7 @@ const out = {
   first_step_s: firstStepS, steps: Number(steps), steps_s: stepsS,
   tiles: Number(await page.getAttribute('body', 'data-tiles')),
   held_peak_bytes: Number(await page.getAttribute('body', 'data-held-peak')),
-  wasm_heap_bytes: heap, gpu_peak_bytes: gpuPeak, bytes_read: read,
+  wasm_heap_bytes: heap, wasm_heap_peak_bytes: heapPeak, gpu_peak_bytes: gpuPeak, bytes_read: read,
   progress: await page.textContent('#progress-text'),
 };
 clearInterval(sampler);

@@ -77,6 +77,8 @@ pub struct Alignment {
     /// Sweeps that took part and ground returns used.
     pub sweeps: usize,
     pub returns: usize,
+    /// One consensus cell in this many kept its returns (`cell_stride`; 0 or 1: all).
+    pub cell_stride: u32,
     /// RMS of the Huber-inlier residuals to the consensus, before and after (m).
     pub rms_before_m: f64,
     pub rms_after_m: f64,
@@ -87,6 +89,8 @@ pub struct Alignment {
 pub struct AlignSummary {
     pub sweeps: usize,
     pub ground_returns: usize,
+    /// One consensus cell in this many kept its returns (long drives: `cell_stride`).
+    pub cells_kept_one_in: u32,
     pub height_rms_m: f64,
     pub tilt_rms_deg: f64,
     pub residual_rms_before_m: f64,
@@ -102,6 +106,7 @@ impl AlignSummary {
         Self {
             sweeps: a.sweeps,
             ground_returns: a.returns,
+            cells_kept_one_in: a.cell_stride.max(1),
             height_rms_m: rms(&|c| c[0]),
             tilt_rms_deg: rms(&|c| c[1].hypot(c[2])).to_degrees(),
             residual_rms_before_m: a.rms_before_m,
@@ -119,6 +124,46 @@ pub struct GroundReturn {
     pub sweep: u32,
 }
 
+/// LiDAR points a drive's sweeps may hold before the alignment thins its returns
+/// (`cell_stride`): its returns and their consensus raster take about 64 bytes each,
+/// and must fit a browser's heap with the rest of the run.
+pub const HELD_POINTS: u64 = 12_000_000;
+
+/// One consensus cell in how many keeps its returns: 1 unless the drive's sweeps hold
+/// more than `HELD_POINTS` points in all (told from the files' sizes, before any is
+/// read), so that the returns held stay under about that whatever the drive's length
+/// (the 3.7 km `long`: 70 M points, one cell in 6). The kept cells are one fixed
+/// pseudo-random pattern of the world, the same for every sweep, so each kept cell
+/// still has every sweep that sees it, and every sweep a plane's worth of returns.
+pub fn cell_stride(b: &Bundle) -> u32 {
+    let Some(l) = &b.manifest.lidar else {
+        return 1;
+    };
+    let bytes: u64 = b
+        .manifest
+        .frames
+        .iter()
+        .filter_map(|f| f.lidar.as_ref())
+        .map(|p| b.source().size(p).unwrap_or(0))
+        .sum();
+    let points = bytes / (4 * l.floats_per_point.max(1) as u64);
+    points.div_ceil(HELD_POINTS).clamp(1, u32::MAX as u64) as u32
+}
+
+/// Whether the consensus cell at world `xy` keeps its returns (`cell_stride`).
+fn kept(xy: [f64; 2], cell_m: f64, stride: u32) -> bool {
+    if stride <= 1 {
+        return true;
+    }
+    let i = (xy[0] / cell_m).floor() as i64 as u64;
+    let j = (xy[1] / cell_m).floor() as i64 as u64;
+    // splitmix64 of the cell's key.
+    let mut h = i.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ j.rotate_left(32);
+    h = (h ^ (h >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    h = (h ^ (h >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    (h ^ (h >> 31)).is_multiple_of(stride as u64)
+}
+
 /// The ground returns of every frame's sweep, through the bundle's poses.
 pub fn ground_returns(b: &Bundle, cfg: &AlignConfig) -> Result<Vec<GroundReturn>, Problem> {
     ground_returns_of(b, cfg, None)
@@ -132,18 +177,21 @@ pub fn ground_returns_of(
     frames: Option<&[bool]>,
 ) -> Result<Vec<GroundReturn>, Problem> {
     let mut out = Vec::new();
+    let stride = cell_stride(b);
     for_each_sweep_of(b, frames, |k, pose, pts| {
-        out.extend(sweep_ground(&pts, pose, k as u32, cfg))
+        out.extend(sweep_ground(&pts, pose, k as u32, cfg, stride))
     })?;
     Ok(out)
 }
 
-/// The ground returns of one sweep (points in the vehicle frame).
+/// The ground returns of one sweep (points in the vehicle frame), in the consensus
+/// cells kept by `stride` (`cell_stride`; 1 keeps all).
 pub fn sweep_ground(
     pts: &[[f64; 3]],
     pose: &Mat4Rows,
     sweep: u32,
     cfg: &AlignConfig,
+    stride: u32,
 ) -> Vec<GroundReturn> {
     let range = |p: &[f64; 3]| p[0].hypot(p[1]);
     // The sweep's near-ground level: the median height of its close returns.
@@ -163,14 +211,13 @@ pub fn sweep_ground(
             (cfg.min_range_m..cfg.max_range_m).contains(&range(p))
                 && (p[2] - level).abs() <= cfg.ground_band_m
         })
-        .map(|p| {
-            let w = apply(pose, *p);
-            GroundReturn {
-                xy: [w[0], w[1]],
-                z: w[2],
-                d: [w[0] - origin[0], w[1] - origin[1]],
-                sweep,
-            }
+        .map(|p| apply(pose, *p))
+        .filter(|w| kept([w[0], w[1]], cfg.cell_m, stride))
+        .map(|w| GroundReturn {
+            xy: [w[0], w[1]],
+            z: w[2],
+            d: [w[0] - origin[0], w[1] - origin[1]],
+            sweep,
         })
         .collect()
 }
@@ -190,7 +237,10 @@ pub fn align_with_returns(
     if returns.is_empty() {
         return None;
     }
-    let a = align(returns, b.manifest.frames.len(), cfg);
+    let a = Alignment {
+        cell_stride: cell_stride(b),
+        ..align(returns, b.manifest.frames.len(), cfg)
+    };
     apply_to_poses(&a, &mut b.manifest);
     Some(a)
 }
@@ -245,6 +295,7 @@ pub fn align(returns: &[GroundReturn], frames: usize, cfg: &AlignConfig) -> Alig
         corrections: corr,
         sweeps: origins.len(),
         returns: returns.len(),
+        cell_stride: 1,
         rms_before_m: rms.first().copied().unwrap_or(0.0),
         rms_after_m: rms.last().copied().unwrap_or(0.0),
     }

@@ -206,14 +206,13 @@ pub fn plan(b: &Bundle, cfg: &ReconstructConfig, t: &TileConfig) -> (TileConfig,
     (tiling, tiles)
 }
 
+/// A view (frame, view) and the corridor's ground samples it sees.
+pub type Seen = ((usize, usize), Vec<[f64; 2]>);
+
 /// Every view (frame, view), in order, with the corridor's ground samples it sees:
 /// points on a lattice of at most 1 m within the half-width of any drive's ground
 /// path.
-fn seen_corridor(
-    b: &Bundle,
-    cfg: &ReconstructConfig,
-    planes: &PosePlanes,
-) -> Vec<((usize, usize), Vec<[f64; 2]>)> {
+fn seen_corridor(b: &Bundle, cfg: &ReconstructConfig, planes: &PosePlanes) -> Vec<Seen> {
     let m = &b.manifest;
     let hw = cfg.prepare.grid.half_width;
     let cull = &cfg.train.cull;
@@ -293,11 +292,7 @@ fn cells_of(pts: &[[f64; 2]], origin: [f64; 2], size: f64, overlap: f64) -> Vec<
 /// whose tiles make the fewest (view, tile) pairs, i.e. the fewest steps. A road that
 /// runs along a lattice line would otherwise be trained twice by every view that sees
 /// it, once in the tile on each side (`long` at 500 m: 2.4 tiles per view).
-pub fn lattice_origin(
-    seen: &[((usize, usize), Vec<[f64; 2]>)],
-    size: f64,
-    overlap: f64,
-) -> [f64; 2] {
+pub fn lattice_origin(seen: &[Seen], size: f64, overlap: f64) -> [f64; 2] {
     let mut best = ([0.0, 0.0], usize::MAX);
     for k in 0..16 {
         let o = [(k % 4) as f64 * size / 4.0, (k / 4) as f64 * size / 4.0];
@@ -1349,7 +1344,7 @@ mod tests {
     /// inside one row of tiles and halves the pairs.
     #[test]
     fn the_lattice_keeps_a_road_off_its_lines() {
-        let seen: Vec<((usize, usize), Vec<[f64; 2]>)> = (0..200)
+        let seen: Vec<Seen> = (0..200)
             .map(|f| {
                 let x0 = f as f64;
                 let pts = (0..20)

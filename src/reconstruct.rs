@@ -9,7 +9,7 @@ use crate::bundle::{Bundle, ClassRole, Problem};
 use crate::eval::{BevRaster, Metrics};
 use crate::gpu::{GpuContext, GpuError};
 use crate::init::align::{
-    align_bundle, align_with_returns, AlignConfig, AlignSummary, GroundReturn,
+    align_bundle, align_with_returns, AlignConfig, AlignSummary, GroundReturns,
 };
 use crate::init::prepare::{lidar_world_of, prepare, PrepareConfig, PrepareError, PrepareReport};
 use crate::init::{PoseIndex, PosePlanes};
@@ -133,7 +133,7 @@ pub fn align(
 pub fn align_from(
     b: &mut Bundle,
     cfg: &ReconstructConfig,
-    returns: Option<&[GroundReturn]>,
+    returns: Option<GroundReturns>,
 ) -> Result<Option<AlignSummary>, ReconstructError> {
     Ok(match (aligns(cfg), returns) {
         (Some(a), Some(r)) => align_with_returns(b, r, a).map(|a| AlignSummary::new(&a)),

@@ -5,7 +5,7 @@
 
 use rogs::bundle::{Frame, Manifest, Mat4Rows};
 use rogs::grid::{Grid, GridConfig};
-use rogs::init::align::{align, apply_to_poses, sweep_ground, AlignConfig, Alignment};
+use rogs::init::align::{align, apply_to_poses, AlignConfig, Alignment, GroundReturns};
 use rogs::loss::regularise::RegData;
 use rogs::loss::LossConfig;
 use rogs::synth::rng::Rng;
@@ -130,11 +130,11 @@ fn drive_thinned(sigma_m: f64, sigma_deg: f64, stride: u32) -> (Vec<[f64; 3]>, A
     let cfg = AlignConfig::default();
     let mut rng = Rng::new(7);
     let mut errors = Vec::new();
-    let mut returns = Vec::new();
+    let mut returns = GroundReturns::new(FRAMES);
     for k in 0..FRAMES {
         let (e, pose) = noisy(k, sigma_m, sigma_deg, &mut rng);
         errors.push(e);
-        returns.extend(sweep_ground(&sweep(k), &pose, k as u32, &cfg, stride));
+        returns.add_sweep(&sweep(k), &pose, k as u32, &cfg, stride);
     }
     (errors, align(&returns, FRAMES, &cfg))
 }

@@ -115,18 +115,110 @@ impl AlignSummary {
     }
 }
 
-/// One ground return: world xy, height, offset from its vehicle's origin, sweep.
+/// One ground return, 16 bytes (a long drive holds millions of them): its offset
+/// from its sweep's origin along the world axes, its height above that origin, and
+/// its sweep. Offsets are within the LiDAR's range, so f32 keeps them to micrometres
+/// where world coordinates (UTM eastings, say) would lose centimetres.
 #[derive(Clone, Copy, Debug)]
 pub struct GroundReturn {
-    pub xy: [f64; 2],
-    pub z: f64,
-    pub d: [f64; 2],
+    pub d: [f32; 2],
+    pub dz: f32,
     pub sweep: u32,
 }
 
+/// The ground returns of a drive: each sweep's world origin (its vehicle's position;
+/// `None` for a sweep that gave no return) and the returns relative to it.
+#[derive(Clone, Debug, Default)]
+pub struct GroundReturns {
+    pub origins: Vec<Option<[f64; 3]>>,
+    pub points: Vec<GroundReturn>,
+}
+
+impl GroundReturns {
+    /// No returns yet, for a drive of `frames` frames.
+    pub fn new(frames: usize) -> Self {
+        Self {
+            origins: vec![None; frames],
+            points: Vec::new(),
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+
+    fn origin(&self, r: &GroundReturn) -> [f64; 3] {
+        self.origins[r.sweep as usize].unwrap_or_default()
+    }
+
+    /// World xy of a return.
+    pub fn xy(&self, r: &GroundReturn) -> [f64; 2] {
+        let o = self.origin(r);
+        [o[0] + r.d[0] as f64, o[1] + r.d[1] as f64]
+    }
+
+    /// World height of a return.
+    pub fn z(&self, r: &GroundReturn) -> f64 {
+        self.origin(r)[2] + r.dz as f64
+    }
+
+    /// Adds the ground returns of one sweep (points in the vehicle frame, `pose` its
+    /// vehicle-to-world), in the consensus cells kept by `stride` (`cell_stride`; 1
+    /// keeps all).
+    pub fn add_sweep(
+        &mut self,
+        pts: &[[f64; 3]],
+        pose: &Mat4Rows,
+        sweep: u32,
+        cfg: &AlignConfig,
+        stride: u32,
+    ) {
+        let range = |p: &[f64; 3]| p[0].hypot(p[1]);
+        // The sweep's near-ground level: the median height of its close returns.
+        let mut near: Vec<f64> = pts
+            .iter()
+            .filter(|p| (cfg.min_range_m..cfg.min_range_m + 7.0).contains(&range(p)))
+            .map(|p| p[2])
+            .collect();
+        if near.is_empty() {
+            return;
+        }
+        let mid = near.len() / 2;
+        let level = *near.select_nth_unstable_by(mid, f64::total_cmp).1;
+        let o = [pose[0][3], pose[1][3], pose[2][3]];
+        let before = self.points.len();
+        self.points.extend(
+            pts.iter()
+                .filter(|p| {
+                    (cfg.min_range_m..cfg.max_range_m).contains(&range(p))
+                        && (p[2] - level).abs() <= cfg.ground_band_m
+                })
+                .map(|p| apply(pose, *p))
+                .filter(|w| kept([w[0], w[1]], cfg.cell_m, stride))
+                .map(|w| GroundReturn {
+                    d: [(w[0] - o[0]) as f32, (w[1] - o[1]) as f32],
+                    dz: (w[2] - o[2]) as f32,
+                    sweep,
+                }),
+        );
+        if self.points.len() > before {
+            let k = sweep as usize;
+            if self.origins.len() <= k {
+                self.origins.resize(k + 1, None);
+            }
+            self.origins[k] = Some(o);
+        }
+    }
+}
+
 /// LiDAR points a drive's sweeps may hold before the alignment thins its returns
-/// (`cell_stride`): its returns and their consensus raster take about 64 bytes each,
-/// and must fit a browser's heap with the rest of the run.
+/// (`cell_stride`): its returns and their consensus raster take about 40 bytes each
+/// (16 held, 24 while the alignment runs), and must fit a browser's heap with the
+/// rest of the run.
 pub const HELD_POINTS: u64 = 12_000_000;
 
 /// One consensus cell in how many keeps its returns: 1 unless the drive's sweeps hold
@@ -165,73 +257,36 @@ fn kept(xy: [f64; 2], cell_m: f64, stride: u32) -> bool {
 }
 
 /// The ground returns of every frame's sweep, through the bundle's poses.
-pub fn ground_returns(b: &Bundle, cfg: &AlignConfig) -> Result<Vec<GroundReturn>, Problem> {
-    ground_returns_of(b, cfg, None)
-}
-
-/// As `ground_returns`, over the frames marked in `frames` only (all when `None`):
-/// the page reads a long drive's sweeps a batch at a time and keeps only these.
-pub fn ground_returns_of(
-    b: &Bundle,
-    cfg: &AlignConfig,
-    frames: Option<&[bool]>,
-) -> Result<Vec<GroundReturn>, Problem> {
-    let mut out = Vec::new();
-    let stride = cell_stride(b);
-    for_each_sweep_of(b, frames, |k, pose, pts| {
-        out.extend(sweep_ground(&pts, pose, k as u32, cfg, stride))
-    })?;
+pub fn ground_returns(b: &Bundle, cfg: &AlignConfig) -> Result<GroundReturns, Problem> {
+    let mut out = GroundReturns::new(b.manifest.frames.len());
+    gather_ground_returns(b, cfg, None, &mut out)?;
     Ok(out)
 }
 
-/// The ground returns of one sweep (points in the vehicle frame), in the consensus
-/// cells kept by `stride` (`cell_stride`; 1 keeps all).
-pub fn sweep_ground(
-    pts: &[[f64; 3]],
-    pose: &Mat4Rows,
-    sweep: u32,
+/// Adds to `out` the ground returns of the frames marked in `frames` (all when
+/// `None`): a lazily read bundle gathers them a batch of sweeps at a time.
+pub fn gather_ground_returns(
+    b: &Bundle,
     cfg: &AlignConfig,
-    stride: u32,
-) -> Vec<GroundReturn> {
-    let range = |p: &[f64; 3]| p[0].hypot(p[1]);
-    // The sweep's near-ground level: the median height of its close returns.
-    let mut near: Vec<f64> = pts
-        .iter()
-        .filter(|p| (cfg.min_range_m..cfg.min_range_m + 7.0).contains(&range(p)))
-        .map(|p| p[2])
-        .collect();
-    if near.is_empty() {
-        return Vec::new();
-    }
-    let mid = near.len() / 2;
-    let level = *near.select_nth_unstable_by(mid, f64::total_cmp).1;
-    let origin = [pose[0][3], pose[1][3]];
-    pts.iter()
-        .filter(|p| {
-            (cfg.min_range_m..cfg.max_range_m).contains(&range(p))
-                && (p[2] - level).abs() <= cfg.ground_band_m
-        })
-        .map(|p| apply(pose, *p))
-        .filter(|w| kept([w[0], w[1]], cfg.cell_m, stride))
-        .map(|w| GroundReturn {
-            xy: [w[0], w[1]],
-            z: w[2],
-            d: [w[0] - origin[0], w[1] - origin[1]],
-            sweep,
-        })
-        .collect()
+    frames: Option<&[bool]>,
+    out: &mut GroundReturns,
+) -> Result<(), Problem> {
+    let stride = cell_stride(b);
+    for_each_sweep_of(b, frames, |k, pose, pts| {
+        out.add_sweep(&pts, pose, k as u32, cfg, stride)
+    })
 }
 
 /// Aligns the bundle's poses in place when it has LiDAR, and says what it did.
 pub fn align_bundle(b: &mut Bundle, cfg: &AlignConfig) -> Result<Option<Alignment>, Problem> {
     let returns = ground_returns(b, cfg)?;
-    Ok(align_with_returns(b, &returns, cfg))
+    Ok(align_with_returns(b, returns, cfg))
 }
 
 /// As `align_bundle`, from ground returns already gathered.
 pub fn align_with_returns(
     b: &mut Bundle,
-    returns: &[GroundReturn],
+    returns: GroundReturns,
     cfg: &AlignConfig,
 ) -> Option<Alignment> {
     if returns.is_empty() {
@@ -239,20 +294,25 @@ pub fn align_with_returns(
     }
     let a = Alignment {
         cell_stride: cell_stride(b),
-        ..align(returns, b.manifest.frames.len(), cfg)
+        ..align(&returns, b.manifest.frames.len(), cfg)
     };
+    drop(returns);
     apply_to_poses(&a, &mut b.manifest);
     Some(a)
 }
 
 /// Estimates the corrections of `frames` frames from their ground returns.
-pub fn align(returns: &[GroundReturn], frames: usize, cfg: &AlignConfig) -> Alignment {
+pub fn align(returns: &GroundReturns, frames: usize, cfg: &AlignConfig) -> Alignment {
     let cells = Cells::new(returns, cfg);
     let origins = sweep_origins(returns, frames);
     let mut corr = vec![[0.0f64; 3]; frames];
     let mut rms = Vec::new();
     for round in 0..=cfg.rounds {
-        let z: Vec<f64> = returns.iter().map(|r| corrected(r, &corr)).collect();
+        let z: Vec<f64> = returns
+            .points
+            .iter()
+            .map(|r| corrected(returns.z(r), r, &corr))
+            .collect();
         let cons = cells.consensus(&z);
         // The cut narrows as the sweeps come together: wide enough at first for a
         // 0.5° tilt at 30 m, then only what ground returns still disagree by.
@@ -261,7 +321,7 @@ pub fn align(returns: &[GroundReturn], frames: usize, cfg: &AlignConfig) -> Alig
         let mut ata = vec![[0.0f64; 6]; frames];
         let mut atb = vec![[0.0f64; 3]; frames];
         let (mut sq, mut inl) = (0.0, 0usize);
-        for (i, r) in returns.iter().enumerate() {
+        for (i, r) in returns.points.iter().enumerate() {
             let Some(c) = cons[cells.cell_of[i] as usize] else {
                 continue;
             };
@@ -275,7 +335,8 @@ pub fn align(returns: &[GroundReturn], frames: usize, cfg: &AlignConfig) -> Alig
             }
             let w = (cfg.huber_m / e.abs().max(1e-12)).min(1.0);
             let s = r.sweep as usize;
-            accumulate(&mut ata[s], &mut atb[s], [1.0, r.d[0], r.d[1]], w, -e);
+            let d = r.d.map(f64::from);
+            accumulate(&mut ata[s], &mut atb[s], [1.0, d[0], d[1]], w, -e);
         }
         rms.push((sq / inl.max(1) as f64).sqrt());
         if round == cfg.rounds {
@@ -301,9 +362,10 @@ pub fn align(returns: &[GroundReturn], frames: usize, cfg: &AlignConfig) -> Alig
     }
 }
 
-fn corrected(r: &GroundReturn, corr: &[[f64; 3]]) -> f64 {
+/// The world height `z` of return `r` under its sweep's correction.
+fn corrected(z: f64, r: &GroundReturn, corr: &[[f64; 3]]) -> f64 {
     let [a, b, c] = corr[r.sweep as usize];
-    r.z + a + b * r.d[0] + c * r.d[1]
+    z + a + b * r.d[0] as f64 + c * r.d[1] as f64
 }
 
 /// Removes the part of the corrections no agreement can see: one world plane
@@ -351,15 +413,13 @@ fn accumulate(m: &mut [f64; 6], rhs: &mut [f64; 3], g: [f64; 3], w: f64, y: f64)
 }
 
 /// The world xy origin of each sweep that has returns, with its frame index.
-fn sweep_origins(returns: &[GroundReturn], frames: usize) -> Vec<(usize, [f64; 2])> {
-    let mut origin: Vec<Option<[f64; 2]>> = vec![None; frames];
-    for r in returns {
-        origin[r.sweep as usize].get_or_insert([r.xy[0] - r.d[0], r.xy[1] - r.d[1]]);
-    }
-    origin
+fn sweep_origins(returns: &GroundReturns, frames: usize) -> Vec<(usize, [f64; 2])> {
+    returns
+        .origins
         .iter()
+        .take(frames)
         .enumerate()
-        .filter_map(|(k, o)| o.map(|o| (k, o)))
+        .filter_map(|(k, o)| o.map(|o| (k, [o[0], o[1]])))
         .collect()
 }
 
@@ -388,12 +448,14 @@ struct Cells {
 }
 
 impl Cells {
-    fn new(returns: &[GroundReturn], cfg: &AlignConfig) -> Self {
+    fn new(all: &GroundReturns, cfg: &AlignConfig) -> Self {
         let key = |r: &GroundReturn| {
-            let i = (r.xy[0] / cfg.cell_m).floor() as i64;
-            let j = (r.xy[1] / cfg.cell_m).floor() as i64;
+            let xy = all.xy(r);
+            let i = (xy[0] / cfg.cell_m).floor() as i64;
+            let j = (xy[1] / cfg.cell_m).floor() as i64;
             (i, j)
         };
+        let returns = &all.points;
         let mut order: Vec<u32> = (0..returns.len() as u32).collect();
         order.sort_by_key(|&i| key(&returns[i as usize]));
         let mut cell_of = vec![0u32; returns.len()];

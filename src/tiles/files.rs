@@ -7,12 +7,12 @@
 //! candidates, held-out views) and of the views that see it (training), and the
 //! sweeps of its near frames when the LiDAR is in use. An untiled run reads every
 //! file. The start reads the truth's files (and, when it aligns, every sweep: the
-//! page streams those a batch at a time through `align::ground_returns_of`).
+//! page streams those a batch at a time through `align::gather_ground_returns`).
 
 use super::{Tile, TileConfig, TiledRun};
 use crate::bundle::{Bundle, LazyFiles, Problem};
 use crate::gpu::GpuContext;
-use crate::init::align::ground_returns_of;
+use crate::init::align::{gather_ground_returns, GroundReturns};
 use crate::optim::train::StepLoss;
 use crate::reconstruct::{aligns, Outcome, ReconstructConfig, ReconstructError};
 use std::collections::BTreeSet;
@@ -143,9 +143,9 @@ pub async fn hold(
 /// Sweeps gathered per batch while aligning a lazily read drive.
 const SWEEP_BATCH_BYTES: u64 = 64 << 20;
 
-/// `TiledRun::new` over a lazily read bundle: the truth's files, then (when it
-/// aligns and is tiled) the sweeps a batch at a time, keeping only their ground
-/// returns; an untiled run is given every file at once.
+/// `TiledRun::new` over a lazily read bundle: when it aligns and is tiled, the
+/// sweeps a batch at a time, keeping only their ground returns; then the truth's
+/// files (an untiled run is given every file at once).
 pub async fn start_lazy(
     b: &mut Bundle,
     files: &LazyFiles,
@@ -155,7 +155,8 @@ pub async fn start_lazy(
     fetch: &mut Fetch<'_>,
 ) -> Result<TiledRun, ReconstructError> {
     let start = start_files(b, &cfg, tiling.is_some());
-    hold(b, files, &start, fetch).await?;
+    // The sweeps first, a batch at a time and nothing else held (the truth's files of
+    // a long drive are hundreds of MB), then the start's files.
     let returns = match (aligns(&cfg), tiling) {
         (Some(a), Some(_)) => {
             let a = a.clone();
@@ -166,7 +167,7 @@ pub async fn start_lazy(
                 .enumerate()
                 .filter_map(|(f, fr)| fr.lidar.clone().map(|l| (f, l)))
                 .collect();
-            let mut returns = Vec::new();
+            let mut returns = GroundReturns::new(m.frames.len());
             let mut k = 0;
             while k < sweeps.len() {
                 let (mut batch, mut bytes) = (Vec::new(), 0u64);
@@ -175,21 +176,20 @@ pub async fn start_lazy(
                     batch.push(sweeps[k].clone());
                     k += 1;
                 }
-                let mut want = start.clone();
-                want.extend(batch.iter().map(|s| s.1.clone()));
+                let want: Vec<String> = batch.iter().map(|s| s.1.clone()).collect();
                 hold(b, files, &want, fetch).await?;
                 let mut mask = vec![false; b.manifest.frames.len()];
                 for (f, _) in &batch {
                     mask[*f] = true;
                 }
-                returns.extend(ground_returns_of(b, &a, Some(&mask))?);
+                gather_ground_returns(b, &a, Some(&mask), &mut returns)?;
             }
-            hold(b, files, &start, fetch).await?;
             Some(returns)
         }
         _ => None,
     };
-    let run = TiledRun::new_with(b, cfg, tiling, ctx, returns.as_deref()).await;
+    hold(b, files, &start, fetch).await?;
+    let run = TiledRun::new_with(b, cfg, tiling, ctx, returns).await;
     files.retain(&[]);
     run
 }

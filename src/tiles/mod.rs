@@ -440,13 +440,13 @@ impl TiledRun {
 
     /// As `new`, with the LiDAR's ground returns already gathered (`returns`), so
     /// that the alignment reads no sweep (a lazily read bundle gathers them a batch
-    /// of sweeps at a time, `align::ground_returns_of`).
+    /// of sweeps at a time, `align::gather_ground_returns`).
     pub async fn new_with(
         b: &mut Bundle,
         cfg: ReconstructConfig,
         tiling: Option<TileConfig>,
         ctx: GpuContext,
-        returns: Option<&[crate::init::align::GroundReturn]>,
+        returns: Option<crate::init::align::GroundReturns>,
     ) -> Result<Self, ReconstructError> {
         crate::reconstruct::check_cameras_fit(&b.manifest, &ctx)?;
         let t = Instant::now();

@@ -296,7 +296,6 @@ pub fn align_with_returns(
         cell_stride: cell_stride(b),
         ..align(&returns, b.manifest.frames.len(), cfg)
     };
-    drop(returns);
     apply_to_poses(&a, &mut b.manifest);
     Some(a)
 }

@@ -641,3 +641,41 @@ fn a_failed_tile_keeps_the_finished_ones_and_the_run_resumes_from_checkpoints() 
     assert!(e.to_string().contains("names tile"), "{e}");
     assert_eq!(o.tiles_done(), 0, "a refused checkpoint changes nothing");
 }
+
+/// A forward camera sees the road from metres ahead, so on a drive that comes back
+/// along its own road the frames nearest a place (both passes', beside it) do not
+/// see it: the map must still cover the road from end to end, not only the ends.
+#[test]
+fn a_drive_out_and_back_is_mapped_along_its_whole_length() {
+    let mut c = SynthConfig::preset(Preset::Long, 1);
+    c.set_length_m(80.0);
+    (c.width, c.height, c.rays_per_axis) = (160, 48, 1);
+    c.truth_resolution = 0.2;
+    let out = generate(&c, &|_, _, _| {}).expect("synth");
+    let mut b = bundle(&out.manifest, &out.files);
+    let mut cfg = ReconstructConfig::default();
+    cfg.prepare.grid.resolution = 0.2;
+    cfg.baseline_ipm = true;
+    let t = TileConfig {
+        size_m: 24.0,
+        overlap_m: 2.0,
+        origin_m: None,
+    };
+    let mut r = pollster::block_on(TiledRun::new(&mut b, cfg, Some(t), ctx())).expect("run");
+    while pollster::block_on(r.step(&b)).expect("step").is_some() {}
+    let o = pollster::block_on(r.finish(&b, &mut |_, _| {})).expect("finish");
+    let m = o.metrics.as_ref().expect("metrics against the truth");
+    let coverage = m.coverage.expect("coverage");
+    // Mapped along its length: every 5 m of the drive's x extent holds map pixels.
+    let g = &o.raster;
+    let stretch = (5.0 / g.resolution) as u32;
+    let empty: Vec<u32> = (0..g.width / stretch)
+        .filter(|&s| {
+            !(s * stretch..(s + 1) * stretch)
+                .any(|col| (0..g.height).any(|row| g.is_valid(col, row)))
+        })
+        .collect();
+    println!("coverage {coverage:.3}, empty 5 m stretches {empty:?}");
+    assert!(coverage >= 0.9, "the map covers {coverage:.3} of the truth");
+    assert!(empty.is_empty(), "unmapped 5 m stretches: {empty:?}");
+}

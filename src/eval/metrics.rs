@@ -13,6 +13,10 @@ pub struct Metrics {
     pub elevation_rmse_m: Option<f64>,
     pub elevation_mae_m: Option<f64>,
     pub elevation_p95_m: Option<f64>,
+    /// Share of the truth's cells that the map covers: PSNR and mIoU are over those
+    /// cells only, so a map with holes is told apart from a good one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub coverage: Option<f64>,
     /// IoU of each road class (by class id) that `miou` averages.
     #[serde(skip_serializing_if = "std::collections::BTreeMap::is_empty")]
     pub iou_per_class: std::collections::BTreeMap<u8, f64>,
@@ -64,6 +68,9 @@ pub struct Tally {
     n: u64,
     inter: [u64; 256],
     union: [u64; 256],
+    /// Truth cells seen, and those the map covers.
+    truth_cells: u64,
+    covered: u64,
 }
 
 impl Default for Tally {
@@ -73,6 +80,8 @@ impl Default for Tally {
             n: 0,
             inter: [0; 256],
             union: [0; 256],
+            truth_cells: 0,
+            covered: 0,
         }
     }
 }
@@ -87,7 +96,9 @@ impl Tally {
     /// Adds the pixels of `truth` valid in both (each looks up the prediction at its
     /// centre).
     pub fn add(&mut self, pred: &BevRaster, truth: &BevRaster) {
+        self.truth_cells += truth.valid.pixels().filter(|v| v.0[0] != 0).count() as u64;
         for_valid_pairs(pred, truth, |p, t| {
+            self.covered += 1;
             let (a, b) = (
                 pred.rgb.get_pixel(p.0, p.1).0,
                 truth.rgb.get_pixel(t.0, t.1).0,
@@ -108,6 +119,16 @@ impl Tally {
                 self.union[b] += 1;
             }
         });
+    }
+
+    /// Share of the truth cells added that the map covers.
+    pub fn coverage(&self) -> Option<f64> {
+        (self.truth_cells > 0).then(|| self.covered as f64 / self.truth_cells as f64)
+    }
+
+    /// Truth cells the map covers.
+    pub fn covered(&self) -> u64 {
+        self.covered
     }
 
     pub fn psnr(&self) -> Option<f64> {
@@ -149,6 +170,7 @@ impl Tally {
             elevation_rmse_m: e.map(|e| e.rmse),
             elevation_mae_m: e.map(|e| e.mae),
             elevation_p95_m: e.map(|e| e.p95),
+            coverage: self.coverage(),
             ..Default::default()
         }
     }

@@ -1,12 +1,15 @@
 //! The paper's LiDAR pseudo-ground-truth for bundles without BEV truth: every LiDAR
 //! point in the world frame (through the bundle's poses), coloured and labelled by
-//! projecting it into the nearest frame's cameras; points that land on an ignore
+//! projecting it into the nearest frame's cameras (SPEC: the nearest camera images;
+//! the first of the three nearest frames that sees it: a forward camera sees little
+//! beside its own frame, so on a drive with only one the reference covers little);
+//! points that land on an ignore
 //! class (cars, sky) are dropped. Rasterised per BEV cell: mean elevation, mean
 //! colour, majority label.
 
 use super::raster::BevRaster;
 use crate::bundle::transform::{apply, inverse as invert, mul};
-use crate::bundle::{Bundle, ClassRole, Problem};
+use crate::bundle::{Bundle, ClassRole, Mat4Rows, Problem};
 use std::collections::HashMap;
 
 /// Accumulated, coloured, labelled LiDAR points in the world frame.
@@ -41,6 +44,20 @@ pub fn lidar_cloud_in(b: &Bundle, m: &crate::bundle::Manifest) -> Result<LidarCl
         .collect();
     let mut cache: HashMap<String, (image::RgbImage, image::GrayImage)> = HashMap::new();
     let mut cloud = LidarCloud::default();
+    // World to camera of every view, once.
+    let to_cam: Vec<Vec<Option<Mat4Rows>>> = m
+        .frames
+        .iter()
+        .map(|f| {
+            f.views
+                .iter()
+                .map(|v| {
+                    let cam = m.camera(&v.camera)?;
+                    Some(invert(&mul(f.view_pose(v), &cam.camera_to_vehicle)))
+                })
+                .collect()
+        })
+        .collect();
     for (k, f) in m.frames.iter().enumerate() {
         let Some(path) = &f.lidar else { continue };
         let to_world = mul(&f.vehicle_to_world, &sensor.lidar_to_vehicle);
@@ -55,9 +72,15 @@ pub fn lidar_cloud_in(b: &Bundle, m: &crate::bundle::Manifest) -> Result<LidarCl
                 (t[0][3] - w[0]).hypot(t[1][3] - w[1])
             };
             order.sort_by(|a, b| dist(*a).total_cmp(&dist(*b)));
-            if let Some((rgb, label)) =
-                colour_point(b, m, &order[..order.len().min(3)], w, &ignore, &mut cache)?
-            {
+            if let Some((rgb, label)) = colour_point(
+                b,
+                m,
+                &to_cam,
+                &order[..order.len().min(3)],
+                w,
+                &ignore,
+                &mut cache,
+            )? {
                 if label != IGNORED {
                     cloud.points.push(w);
                     cloud.colors.push(rgb);
@@ -76,10 +99,12 @@ const IGNORED: u8 = 255;
 const IGNORE_DILATION: i64 = 2;
 
 /// Colour and label of world point `w` from the closest camera (smallest depth) of the
-/// first frame in `frames` that sees it; `IGNORED` near ignore-class pixels.
+/// first frame in `frames` that sees it (`to_cam`: world to camera per frame and
+/// view); `IGNORED` near ignore-class pixels.
 fn colour_point(
     b: &Bundle,
     m: &crate::bundle::Manifest,
+    to_cam: &[Vec<Option<Mat4Rows>>],
     frames: &[usize],
     w: [f64; 3],
     ignore: &[bool],
@@ -89,10 +114,10 @@ fn colour_point(
         let f = &m.frames[j];
         let mut best: Option<(f64, usize, u32, u32)> = None;
         for (vi, v) in f.views.iter().enumerate() {
-            let Some(cam) = m.camera(&v.camera) else {
+            let (Some(cam), Some(t)) = (m.camera(&v.camera), &to_cam[j][vi]) else {
                 continue;
             };
-            let c = apply(&invert(&mul(f.view_pose(v), &cam.camera_to_vehicle)), w);
+            let c = apply(t, w);
             if c[2] < 0.5 {
                 continue;
             }

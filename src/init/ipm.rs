@@ -57,6 +57,10 @@ const DECODE_CHUNK: usize = 32;
 const MIN_DEPTH: f64 = 0.5;
 /// Farther than this a road point is a few pixels wide at best.
 const MAX_DEPTH: f64 = 35.0;
+/// Farthest a camera stands from its frame's pose in xy (the rig's offsets), metres.
+const RIG_REACH: f64 = 5.0;
+/// Most frames searched for the views of one point (`Cams::views_near`).
+const MAX_FRAMES: usize = 1024;
 
 impl Cams {
     pub fn new(m: &Manifest) -> Self {
@@ -104,21 +108,62 @@ impl Cams {
         })
     }
 
-    /// Up to `n` views of `p` among the cameras of its `frames` nearest frames,
-    /// nearest (smallest depth) first.
-    pub fn candidates(
+    /// Up to `n` views of `p`, nearest in depth first, among the frames nearest to
+    /// it in xy that `use_frame` accepts: the nearest `frames`, then four times as
+    /// many while fewer than `n` of their views see `p`, until the frames searched
+    /// reach past `MAX_DEPTH` (or `MAX_FRAMES`). A forward camera sees the road only
+    /// from metres ahead: where a drive passes a place twice (out and back, a loop,
+    /// a second drive), its nearest frames are both passes' frames beside the place
+    /// and none of them sees it; a fixed count of nearest frames left the middle of
+    /// an out-and-back drive unseen, so unmapped.
+    pub fn views_near(
         &self,
         poses: &PoseIndex,
         p: [f64; 3],
         frames: usize,
         n: usize,
+        use_frame: &(dyn Fn(usize) -> bool + Sync),
     ) -> Vec<Projection> {
-        let near: Vec<usize> = poses
-            .nearest(p[0], p[1], frames)
-            .into_iter()
-            .map(|(_, f)| f)
-            .collect();
-        self.candidates_in(&near, p, n)
+        self.search(poses, p, frames, n, use_frame).1
+    }
+
+    /// The frames `views_near` searched for views of `p` (its widest search), for
+    /// callers that look for the views of many points near `p` among them.
+    pub fn frames_near(
+        &self,
+        poses: &PoseIndex,
+        p: [f64; 3],
+        frames: usize,
+        n: usize,
+    ) -> Vec<usize> {
+        self.search(poses, p, frames, n, &|_| true).0
+    }
+
+    fn search(
+        &self,
+        poses: &PoseIndex,
+        p: [f64; 3],
+        frames: usize,
+        n: usize,
+        use_frame: &(dyn Fn(usize) -> bool + Sync),
+    ) -> (Vec<usize>, Vec<Projection>) {
+        let mut k = frames.max(1);
+        loop {
+            let near = poses.nearest(p[0], p[1], k);
+            let reached = near.len() < k
+                || k >= MAX_FRAMES
+                || near.last().is_some_and(|l| l.0 > MAX_DEPTH + RIG_REACH);
+            let ids: Vec<usize> = near
+                .into_iter()
+                .map(|(_, f)| f)
+                .filter(|&f| use_frame(f))
+                .collect();
+            let out = self.candidates_in(&ids, p, n);
+            if out.len() >= n || reached {
+                return (ids, out);
+            }
+            k *= 4;
+        }
     }
 
     /// Up to `n` views of `p` among the cameras of `frames`, nearest first.
@@ -233,7 +278,9 @@ pub fn mosaic(b: &Bundle, grid: &Grid, z: &[f32], poses: &PoseIndex) -> Result<B
     let candidates: Vec<Vec<Projection>> = crate::par::par_map(base.len(), |i| {
         let k = base[i];
         let [x, y] = grid.xy(k);
-        cams.candidates(poses, [x, y, z[k] as f64], candidate_frames(b), 3)
+        cams.views_near(poses, [x, y, z[k] as f64], candidate_frames(b), 3, &|_| {
+            true
+        })
     });
     sample_best(b, &cams, &candidates, |i, imgs, p| {
         let k = base[i];
@@ -265,13 +312,13 @@ pub fn surfel_colours(
     let cams = Cams::new(&b.manifest);
     let candidates: Vec<Vec<Projection>> = crate::par::par_map(grid.len(), |k| {
         let [x, y] = grid.xy(k);
-        let near: Vec<usize> = poses
-            .nearest(x, y, candidate_frames(b))
-            .into_iter()
-            .map(|(_, f)| f)
-            .filter(|&f| use_frame(f))
-            .collect();
-        cams.candidates_in(&near, [x, y, z[k] as f64], 3)
+        cams.views_near(
+            poses,
+            [x, y, z[k] as f64],
+            candidate_frames(b),
+            3,
+            use_frame,
+        )
     });
     let mut out = vec![None; grid.len()];
     sample_best(b, &cams, &candidates, |k, imgs, p| {

@@ -102,19 +102,20 @@ pub fn refine(
     // Candidate frames per block of 8×8 cells (0.4 m at 5 cm): one neighbour search
     // per block instead of per cell.
     let block_of = |c: [i32; 2]| (c[0].div_euclid(16), c[1].div_euclid(16));
-    let mut blocks: Vec<(i32, i32)> = cells.iter().map(|&c| block_of(c)).collect();
+    // Each block's frames are those that see one of its cells (`Cams::frames_near`).
+    let mut blocks: Vec<((i32, i32), usize)> = cells
+        .iter()
+        .enumerate()
+        .map(|(i, &c)| (block_of(c), i))
+        .collect();
     blocks.sort_unstable();
-    blocks.dedup();
+    blocks.dedup_by_key(|b| b.0);
     let block_frames: Vec<Vec<usize>> = crate::par::par_map(blocks.len(), |k| {
-        let [x, y] = grid.xy_of(blocks[k].0 * 16 + 8, blocks[k].1 * 16 + 8);
-        poses
-            .nearest(x, y, candidate_frames(b))
-            .into_iter()
-            .map(|(_, f)| f)
-            .collect()
+        cams.frames_near(poses, centres[blocks[k].1], candidate_frames(b), 2)
     });
     let candidates: Vec<Vec<Projection>> = crate::par::par_map(centres.len(), |i| {
-        let k = blocks.binary_search(&block_of(cells[i])).unwrap_or(0);
+        let key = block_of(cells[i]);
+        let k = blocks.partition_point(|b| b.0 < key);
         cams.candidates_in(&block_frames[k], centres[i], 2)
     });
     let classes = b.manifest.classes();

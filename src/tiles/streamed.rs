@@ -113,6 +113,9 @@ impl TiledRun {
         let metrics = self.truth.as_ref().map(|t| {
             let mut m = tally.metrics(&road_ids, elevation_vs_raster(&self.centres, t));
             m.initial_elevation_rmse_m = self.initial_rmse();
+            // Of the whole truth: blocks where no tile rendered hold truth cells too.
+            let cells = t.valid.pixels().filter(|v| v.0[0] != 0).count();
+            m.coverage = (cells > 0).then(|| tally.covered() as f64 / cells as f64);
             m
         });
         // The report reads the map's geometry, metrics and held-out scores.

@@ -8,7 +8,10 @@
 //! (world points on the road with their level-0 elevation, read natively), and
 //! `splats-z.ply`, `splats-y.ply`, `splats-semantic.ply` with `splats.json` (the
 //! surfels they hold, for a real splat reader to be checked against), and the catalogue
-//! of malformed bundles in `catalogue/` (`rogs example --malformed`).
+//! of malformed bundles in `catalogue/` (`rogs example --malformed`), and for the
+//! page's segmentation: `kitti-unlabelled.zip` (frames of the real KITTI sample, no
+//! labels), `kitti-labelled-native.zip` (the same labelled natively by `rogs
+//! segment`'s code), the model `twinlitenet.onnx` and a damaged `corrupt.onnx`.
 //! Usage: `cargo run --example page_fixtures -- OUT_DIR`.
 
 use rogs::bundle::example::{self, png_gray};
@@ -57,12 +60,47 @@ fn main() -> Result<(), String> {
     .map_err(|e| e.to_string())?;
     maps(&out)?;
     splats(&out)?;
+    #[cfg(not(target_arch = "wasm32"))]
+    segmentation(&out)?;
     rogs::bundle::catalogue::write(&out.join("catalogue"))?;
     eprintln!(
         "wrote {}/valid.zip, invalid.zip, demo.zip, unlabelled.zip and the map files",
         out.display()
     );
     Ok(())
+}
+
+/// The page's segmentation fixtures: 4 frames of the real KITTI sample without
+/// labels, the same labelled natively (the page's labels are checked against them),
+/// TwinLiteNet (shared/models) and a damaged copy of it. Native only (the importer
+/// and the runtime are).
+#[cfg(not(target_arch = "wasm32"))]
+fn segmentation(out: &std::path::Path) -> Result<(), String> {
+    let shared = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared");
+    let root = shared.join("data/kitti-odometry-sample");
+    let mut o =
+        rogs::import::kitti::KittiOptions::new(&root, "00", out.join("kitti-unlabelled.zip"));
+    o.frames = Some(0..4);
+    rogs::import::kitti::import(&o, &mut |_, _, _| {}).map_err(|e| e.to_string())?;
+    let model = std::fs::read(shared.join("models/twinlitenet/twinlitenet.onnx"))
+        .map_err(|e| format!("the test model (shared/models/twinlitenet): {e}"))?;
+    let zip = std::fs::read(out.join("kitti-unlabelled.zip")).map_err(|e| e.to_string())?;
+    let b = rogs::bundle::Bundle::from_zip_bytes(zip, rogs::bundle::Limits::default())
+        .map_err(|e| e.to_string())?;
+    let seg = rogs::segment::Segmenter::new(
+        "twinlitenet.onnx",
+        &model,
+        rogs::segment::ClassMap::twinlitenet(),
+    )
+    .map_err(|e| e.to_string())?;
+    let done =
+        rogs::segment::label_bundle(&b, &seg, std::io::Cursor::new(Vec::new()), &mut |_, _| {})?;
+    let write = |name: &str, bytes: &[u8]| {
+        std::fs::write(out.join(name), bytes).map_err(|e| format!("{name}: {e}"))
+    };
+    write("kitti-labelled-native.zip", &done.sink.into_inner())?;
+    write("twinlitenet.onnx", &model)?;
+    write("corrupt.onnx", &model[..model.len() / 2])
 }
 
 fn entries(zip: &[u8]) -> Result<Vec<(String, Vec<u8>)>, String> {

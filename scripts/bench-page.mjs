@@ -3,11 +3,16 @@
 // www/ (build it first: bash scripts/build-wasm.sh) and
 // prints the steps, seconds per step and total time as JSON. With `steps`, it stops
 // the run after that many steps (large bundles: time per step without a whole epoch).
+// With `--segment MODEL.onnx`, masks are computed in the page first ("Compute masks
+// with a model…", TwinLiteNet's class map) and their time is printed as well.
 import { openBench } from './bench-browser.mjs';
 
-const [bundle, resolution = '0.1', maxSteps] = process.argv.slice(2);
-if (!bundle) {
-  console.error('usage: node scripts/bench-page.mjs BUNDLE.zip [resolution] [steps]');
+const args = process.argv.slice(2);
+const seg = args.indexOf('--segment');
+const model = seg >= 0 ? args.splice(seg, 2)[1] : null;
+const [bundle, resolution = '0.1', maxSteps] = args;
+if (!bundle || (seg >= 0 && !model)) {
+  console.error('usage: node scripts/bench-page.mjs BUNDLE.zip [resolution] [steps] [--segment MODEL.onnx]');
   process.exit(2);
 }
 const { base, bundleUrl, browser, close } = await openBench(bundle);
@@ -15,6 +20,14 @@ try {
   const page = await browser.newPage();
   await page.goto(`${base}/?url=${bundleUrl}`);
   await page.waitForSelector('#optimise:not([hidden])', { timeout: 120_000 });
+  let segment = null;
+  if (model) {
+    await page.setInputFiles('#segment-model', model);
+    await page.waitForFunction(() => ['done', 'failed'].includes(document.body.dataset.segment), null, { timeout: 3_600_000, polling: 500 });
+    segment = { seconds: Number(await page.getAttribute('body', 'data-segment-seconds')), status: await page.textContent('#status') };
+    console.error(JSON.stringify({ segment }));
+    if (!segment.seconds) process.exit(1);
+  }
   await page.selectOption('#set-resolution', resolution);
   const t0 = Date.now();
   await page.click('#run');
@@ -23,7 +36,7 @@ try {
     const text = await page.textContent('#progress-text');
     await page.click('#stop');
     const perStep = Number((text.match(/([\d.]+) s per step/) || [])[1]);
-    console.log(JSON.stringify({ bundle, resolution: Number(resolution), steps: Number(maxSteps), seconds_per_step: perStep, setup_and_steps_s: (Date.now() - t0) / 1000, progress: text }, null, 2));
+    console.log(JSON.stringify({ bundle, segment, resolution: Number(resolution), steps: Number(maxSteps), seconds_per_step: perStep, setup_and_steps_s: (Date.now() - t0) / 1000, progress: text }, null, 2));
     process.exit(0);
   }
   await page.waitForSelector('#viewer:not([hidden]) #exports a', { timeout: 3_600_000 });
@@ -31,7 +44,7 @@ try {
   const steps = Number(await page.getAttribute('body', 'data-steps'));
   const text = await page.textContent('#progress-text');
   const perStep = Number((text.match(/([\d.]+) s per step/) || [])[1]);
-  console.log(JSON.stringify({ bundle, resolution: Number(resolution), steps, seconds_per_step: perStep, total_s: total, status: await page.textContent('#status'), metrics: await page.textContent('#metrics') }, null, 2));
+  console.log(JSON.stringify({ bundle, segment, resolution: Number(resolution), steps, seconds_per_step: perStep, total_s: total, status: await page.textContent('#status'), metrics: await page.textContent('#metrics') }, null, 2));
 } finally {
   await close();
 }

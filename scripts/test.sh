@@ -16,6 +16,8 @@ step "cargo clippy (native)"
 cargo clippy --all-targets -- -D warnings
 step "cargo clippy (wasm32)"
 cargo clippy --target wasm32-unknown-unknown --all-targets -- -D warnings
+step "cargo clippy (wasm32, the page's segmentation module)"
+cargo clippy --target wasm32-unknown-unknown --features segmenter --lib -- -D warnings
 
 step "native tests on $(WGPU_BACKEND=$WGPU_BACKEND echo "$WGPU_BACKEND")"
 cargo build --bins --examples

@@ -21,7 +21,7 @@ pub mod optim;
 pub mod par;
 pub mod reconstruct;
 pub mod render;
-#[cfg(not(target_arch = "wasm32"))]
+#[cfg(any(not(target_arch = "wasm32"), feature = "segmenter"))]
 pub mod segment;
 pub mod settings;
 pub mod spatial;
@@ -31,5 +31,10 @@ pub mod tiles;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod cli;
 
-#[cfg(target_arch = "wasm32")]
+#[cfg(all(target_arch = "wasm32", not(feature = "segmenter")))]
+pub mod web;
+/// The page's segmentation module is another build of this crate (feature
+/// `segmenter`): its bindings are only those of `src/web/segment.rs`.
+#[cfg(all(target_arch = "wasm32", feature = "segmenter"))]
+#[path = "web/segment.rs"]
 pub mod web;

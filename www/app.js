@@ -6,6 +6,7 @@ import { offerOptimisation, setEngineMemory, wireMap } from './map.js';
 import { openReview, wireReview } from './review.js';
 import { blobSource, urlSource, isMapFile } from './rogsmap.js';
 import { LAZY_BYTES, lazyForced, openLazyBundle } from './bundle.js';
+import { wireSegment, isModelFile, computeMasks } from './segment.js';
 
 const $ = (id) => document.getElementById(id);
 let engineReady = null;
@@ -269,6 +270,7 @@ async function openUrl(url) {
 
 function wireInputs() {
   $('picker').addEventListener('change', (e) => openFile(e.target.files[0]));
+  wireSegment(setStatus, () => drives, (bytes, name) => openBytes(bytes, name));
   $('add-drive').addEventListener('change', async (e) => {
     for (const f of e.target.files) await openFile(f, true);
     e.target.value = '';
@@ -294,9 +296,11 @@ function wireInputs() {
     depth = 0;
     overlay.hidden = true;
     const files = e.dataTransfer ? [...e.dataTransfer.files] : [];
+    // A model (with its class map) labels the open bundle.
+    if (files.some(isModelFile)) { computeMasks(files, setStatus, () => drives, (bytes, name) => openBytes(bytes, name)); return; }
     // Several bundles dropped at once are drives of one map.
     if (files.length) (async () => { for (const [i, f] of files.entries()) await openFile(f, i > 0); })();
-    else setStatus('Nothing to open: drop a bundle (.zip) or a map (.rogsmap).', 'error');
+    else setStatus('Nothing to open: drop a bundle (.zip), a map (.rogsmap) or a segmentation model (.onnx).', 'error');
   });
 }
 

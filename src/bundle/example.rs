@@ -34,12 +34,7 @@ pub fn front_camera() -> Camera {
 }
 
 pub fn classes() -> Vec<SemanticClass> {
-    let c = |id, name: &str, color, role| SemanticClass {
-        id,
-        name: name.into(),
-        color,
-        role,
-    };
+    let c = SemanticClass::new;
     vec![
         c(0, "road", [128, 64, 128], ClassRole::Road),
         c(1, "lane_marking", [255, 255, 255], ClassRole::Road),

@@ -73,6 +73,17 @@ pub struct SemanticClass {
     pub role: ClassRole,
 }
 
+impl SemanticClass {
+    pub fn new(id: u8, name: &str, color: [u8; 3], role: ClassRole) -> Self {
+        Self {
+            id,
+            name: name.into(),
+            color,
+            role,
+        }
+    }
+}
+
 /// The label value of the supervised road plane in a drive without labels (0 is
 /// outside it: above the horizon, beyond `SURFACE_RANGE_M`, the vehicle's body).
 pub const SURFACE_ID: u8 = 1;

@@ -8,11 +8,11 @@
 //! bundle holds), so importing is I/O bound.
 
 use super::{
-    check_label, class, header_dims, inverse, known_ids, mul, read_classes, read_file, resolve,
-    rigid, ImportError, Imported, Output, ProgressFn, NO_LABELS_WARNING,
+    check_label, header_dims, inverse, known_ids, mul, read_classes, read_file, resolve, rigid,
+    ImportError, Imported, Output, ProgressFn, NO_LABELS_WARNING,
 };
 use crate::bundle::{
-    Camera, ClassRole, Frame, LidarSensor, Manifest, Mat4Rows, SemanticClass, View, FORMAT, VERSION,
+    Camera, Frame, LidarSensor, Manifest, Mat4Rows, SemanticClass, View, FORMAT, VERSION,
 };
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -58,13 +58,7 @@ impl std::str::FromStr for Classes {
 }
 
 /// TwinLiteNet masks: 0 = other, 1 = drivable road, 2 = lane marking.
-pub fn twinlitenet_classes() -> Vec<SemanticClass> {
-    vec![
-        class(0, "other", [0, 0, 0], ClassRole::Ignore),
-        class(1, "road", [128, 64, 128], ClassRole::Road),
-        class(2, "lane_marking", [255, 255, 255], ClassRole::Road),
-    ]
-}
+pub use crate::segment::twinlitenet_classes;
 
 #[derive(Clone, Debug)]
 pub struct KittiOptions {

@@ -48,6 +48,16 @@ pub struct ClassMap {
     pub default: u8,
 }
 
+/// TwinLiteNet's classes: the KITTI importer's `--classes twinlitenet` too.
+pub fn twinlitenet_classes() -> Vec<SemanticClass> {
+    let class = SemanticClass::new;
+    vec![
+        class(0, "other", [0, 0, 0], ClassRole::Ignore),
+        class(1, "road", [128, 64, 128], ClassRole::Road),
+        class(2, "lane_marking", [255, 255, 255], ClassRole::Road),
+    ]
+}
+
 impl ClassMap {
     /// TwinLiteNet's (shared/models/twinlitenet): 320×320 RGB in 0..1; a lane line
     /// where `lanes` says 1, else road where `drivable_area` says 1, else other. The
@@ -61,7 +71,7 @@ impl ClassMap {
                 mean: [0.0; 3],
                 std: [1.0; 3],
             },
-            classes: crate::import::kitti::twinlitenet_classes(),
+            classes: twinlitenet_classes(),
             outputs: vec![
                 Rule {
                     output: "lanes".into(),

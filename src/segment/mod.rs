@@ -12,7 +12,7 @@
 
 mod classmap;
 
-pub use classmap::{ClassMap, InputSpec, Rule};
+pub use classmap::{twinlitenet_classes, ClassMap, InputSpec, Rule};
 
 use image::{GrayImage, RgbImage};
 use tract_onnx::prelude::*;

@@ -226,7 +226,7 @@ impl Stitcher {
 
     /// The blended layers of the whole map (NaN confidence, density and elevation
     /// where no tile rendered anything).
-    pub fn finish(self) -> Layers {
+    pub fn finish(mut self) -> Layers {
         let g = self.geometry;
         let n = (g.width * g.height) as usize;
         let ch = self.channels;
@@ -239,6 +239,9 @@ impl Stitcher {
             let Some((w, l)) = self.block(bx, by) else {
                 continue;
             };
+            // Each block's sums go as its layers are copied: the later layers of
+            // the map (its images) reuse that memory.
+            self.blocks.remove(&(bx, by));
             let bw = w.geometry.width as usize;
             for y in 0..w.geometry.height as usize {
                 let (li, gi) = (

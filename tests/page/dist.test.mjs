@@ -23,6 +23,13 @@ test('dist/ holds the release engine within its size budget, without a name sect
   assert.deepEqual(customSections(bytes), [], 'custom sections were not stripped');
 });
 
+test('dist/ holds the segmentation module the page fetches when a model is dropped, stripped too', () => {
+  const wasm = path.join(dist, 'pkg-segment/rogs_segment_bg.wasm');
+  assert.ok(fs.existsSync(wasm) && fs.existsSync(path.join(dist, 'pkg-segment/rogs_segment.js')) && fs.existsSync(path.join(dist, 'segment-worker.js')),
+    'dist/ lacks the segmentation module: run `npm run build` (scripts/build.sh)');
+  assert.deepEqual(customSections(fs.readFileSync(wasm)), [], 'custom sections were not stripped');
+});
+
 /** The names of a wasm module's custom sections. */
 function customSections(bytes) {
   const leb = (pos) => {

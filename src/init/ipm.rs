@@ -109,37 +109,14 @@ impl Cams {
     }
 
     /// Up to `n` views of `p`, nearest in depth first, among the frames nearest to
-    /// it in xy that `use_frame` accepts: the nearest `frames`, then four times as
-    /// many while fewer than `n` of their views see `p`, until the frames searched
-    /// reach past `MAX_DEPTH` (or `MAX_FRAMES`). A forward camera sees the road only
-    /// from metres ahead: where a drive passes a place twice (out and back, a loop,
-    /// a second drive), its nearest frames are both passes' frames beside the place
-    /// and none of them sees it; a fixed count of nearest frames left the middle of
-    /// an out-and-back drive unseen, so unmapped.
+    /// it in xy that `use_frame` accepts, and the frames searched: the nearest
+    /// `frames`, then four times as many while fewer than `n` of their views see `p`,
+    /// until the frames searched reach past `MAX_DEPTH` (or `MAX_FRAMES`). A forward
+    /// camera sees the road only from metres ahead: where a drive passes a place
+    /// twice (out and back, a loop, a second drive), its nearest frames are both
+    /// passes' frames beside the place and none of them sees it; a fixed count of
+    /// nearest frames left the middle of an out-and-back drive unseen, so unmapped.
     pub fn views_near(
-        &self,
-        poses: &PoseIndex,
-        p: [f64; 3],
-        frames: usize,
-        n: usize,
-        use_frame: &(dyn Fn(usize) -> bool + Sync),
-    ) -> Vec<Projection> {
-        self.search(poses, p, frames, n, use_frame).1
-    }
-
-    /// The frames `views_near` searched for views of `p` (its widest search), for
-    /// callers that look for the views of many points near `p` among them.
-    pub fn frames_near(
-        &self,
-        poses: &PoseIndex,
-        p: [f64; 3],
-        frames: usize,
-        n: usize,
-    ) -> Vec<usize> {
-        self.search(poses, p, frames, n, &|_| true).0
-    }
-
-    fn search(
         &self,
         poses: &PoseIndex,
         p: [f64; 3],
@@ -278,9 +255,9 @@ pub fn mosaic(b: &Bundle, grid: &Grid, z: &[f32], poses: &PoseIndex) -> Result<B
     let candidates: Vec<Vec<Projection>> = crate::par::par_map(base.len(), |i| {
         let k = base[i];
         let [x, y] = grid.xy(k);
-        cams.views_near(poses, [x, y, z[k] as f64], candidate_frames(b), 3, &|_| {
-            true
-        })
+        let p = [x, y, z[k] as f64];
+        cams.views_near(poses, p, candidate_frames(b), 3, &|_| true)
+            .1
     });
     sample_best(b, &cams, &candidates, |i, imgs, p| {
         let k = base[i];
@@ -312,13 +289,9 @@ pub fn surfel_colours(
     let cams = Cams::new(&b.manifest);
     let candidates: Vec<Vec<Projection>> = crate::par::par_map(grid.len(), |k| {
         let [x, y] = grid.xy(k);
-        cams.views_near(
-            poses,
-            [x, y, z[k] as f64],
-            candidate_frames(b),
-            3,
-            use_frame,
-        )
+        let p = [x, y, z[k] as f64];
+        cams.views_near(poses, p, candidate_frames(b), 3, use_frame)
+            .1
     });
     let mut out = vec![None; grid.len()];
     sample_best(b, &cams, &candidates, |k, imgs, p| {

@@ -102,7 +102,7 @@ pub fn refine(
     // Candidate frames per block of 8×8 cells (0.4 m at 5 cm): one neighbour search
     // per block instead of per cell.
     let block_of = |c: [i32; 2]| (c[0].div_euclid(16), c[1].div_euclid(16));
-    // Each block's frames are those that see one of its cells (`Cams::frames_near`).
+    // Each block's frames are those searched for one of its cells (`Cams::views_near`).
     let mut blocks: Vec<((i32, i32), usize)> = cells
         .iter()
         .enumerate()
@@ -111,7 +111,10 @@ pub fn refine(
     blocks.sort_unstable();
     blocks.dedup_by_key(|b| b.0);
     let block_frames: Vec<Vec<usize>> = crate::par::par_map(blocks.len(), |k| {
-        cams.frames_near(poses, centres[blocks[k].1], candidate_frames(b), 2)
+        cams.views_near(poses, centres[blocks[k].1], candidate_frames(b), 2, &|_| {
+            true
+        })
+        .0
     });
     let candidates: Vec<Vec<Projection>> = crate::par::par_map(centres.len(), |i| {
         let key = block_of(cells[i]);

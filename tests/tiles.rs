@@ -178,6 +178,30 @@ fn a_tiled_map_matches_the_untiled_one_without_seams() {
     assert!(report["seams"]["border_pairs"].as_u64().unwrap_or(0) > 0);
     assert!(report["peak_gpu_bytes"].as_u64().unwrap_or(0) > 0);
     assert!(report["peak_host_bytes"].as_u64().unwrap_or(0) > 0);
+    assert!(report["peak_host_training_bytes"].as_u64().unwrap_or(0) > 0);
+    // The blend sealed each block as the last tile rendering into it finished (the
+    // map here spans few blocks, so the peak is not lower; stitch.rs tests that on a
+    // longer one), and sealed blocks hold a fraction of their sums.
+    let blend = &report["blend"];
+    assert_eq!(blend["blocks_open"].as_u64(), Some(0), "{blend}");
+    assert!(blend["blocks_sealed"].as_u64().unwrap_or(0) > 0, "{blend}");
+    let windows: Vec<_> = r
+        .tiles
+        .iter()
+        .filter_map(|t| rogs::tiles::Stitcher::new(r.geometry, 1, 0.0).window(&t.rect))
+        .collect();
+    let all_open =
+        rogs::tiles::Stitcher::block_bytes(&r.geometry, tiled.params.channels, windows.iter());
+    let held = blend["held_bytes"].as_u64().unwrap_or(u64::MAX);
+    assert!(
+        held < all_open / 2,
+        "sealed blend {held} B, open {all_open} B"
+    );
+    let peak = blend["peak_held_bytes"].as_u64().unwrap_or(u64::MAX);
+    assert!(
+        peak <= all_open,
+        "blend peak {peak} B, all blocks open {all_open} B"
+    );
 }
 
 #[test]

@@ -366,6 +366,9 @@ pub struct TileReport {
     /// Restored from a checkpoint of an earlier run (`--resume`), not trained here.
     #[serde(default)]
     pub restored: bool,
+    /// The process's resident memory as the tile was added to the map (natively).
+    #[serde(default)]
+    pub host_bytes: Option<u64>,
 }
 
 /// A reconstruction over tiles, stepped like a `Session` (one tile, the whole map,
@@ -421,6 +424,8 @@ pub struct TiledRun {
     /// The map's whole layers would exceed the budget: it is written block by block
     /// (`finish_streamed`), never whole.
     pub streamed: bool,
+    /// The blend's memory as of the last finished tile (report.json's `blend`).
+    blend: serde_json::Value,
 }
 
 /// The map's layers may take this many times the surfel grid's memory budget.
@@ -499,6 +504,7 @@ impl TiledRun {
             fault_tile: None,
             poses: None,
             streamed: false,
+            blend: serde_json::Value::Null,
             cfg,
         };
         match tiling {
@@ -835,6 +841,7 @@ impl TiledRun {
             peak_gpu_bytes: self.peak_gpu_bytes,
             stopped: s.stopped.clone(),
             restored: false,
+            host_bytes: None,
         };
         if self.checkpoints && tile.is_some() && s.stopped.is_none() {
             self.pending.push_back((
@@ -879,7 +886,35 @@ impl TiledRun {
         if let Some(d) = self.done.get_mut(f.index) {
             *d = true;
         }
-        self.reports.push(f.report);
+        self.seal_finished_blocks();
+        let mut report = f.report;
+        report.host_bytes = crate::mem::host_bytes();
+        self.reports.push(report);
+    }
+
+    /// Seals the blend's blocks that no unfinished tile renders into: the blend
+    /// holds the blocks around the tiles still to come, not the whole drive's.
+    fn seal_finished_blocks(&mut self) {
+        if self.tiling.is_none() {
+            return;
+        }
+        self.stitch.note_peak();
+        let mut open = std::collections::BTreeSet::new();
+        for (k, t) in self.tiles.iter().enumerate() {
+            if self.done.get(k).is_some_and(|&d| !d) {
+                if let Some(w) = self.stitch.window(&t.rect) {
+                    open.extend(Stitcher::blocks_of(&w));
+                }
+            }
+        }
+        self.stitch.seal_except(&open);
+        let (open, sealed) = self.stitch.counts();
+        self.blend = serde_json::json!({
+            "peak_held_bytes": self.stitch.peak_held_bytes,
+            "held_bytes": self.stitch.held_bytes(),
+            "blocks_open": open,
+            "blocks_sealed": sealed,
+        });
     }
 
     /// The checkpoint of a tile finished (or skipped) since the last call, once
@@ -1167,6 +1202,13 @@ impl TiledRun {
         r["peak_gpu_bytes"] = serde_json::to_value(peak_gpu).unwrap_or_default();
         r["peak_host_bytes"] =
             serde_json::to_value(crate::mem::peak_host_bytes()).unwrap_or_default();
+        // While training (the finish, which assembles the layers, comes after).
+        r["peak_host_training_bytes"] =
+            serde_json::to_value(self.reports.iter().filter_map(|t| t.host_bytes).max())
+                .unwrap_or_default();
+        if self.tiling.is_some() {
+            r["blend"] = self.blend.clone();
+        }
         r["world_frame"] = serde_json::to_value(&b.manifest.world_frame).unwrap_or_default();
         r["drives"] = b
             .drives

@@ -203,6 +203,16 @@ fn a_run_that_failed_at_a_tile_resumes_with_the_finished_tiles() {
         .count();
     assert_eq!(restored, kept, "{}", report["tiles"]);
     assert!(report["stopped"].is_null(), "{}", report["stopped"]);
+    // The finished tiles' surfels were left in their checkpoints, not held, and
+    // read back into surfels.ply.
+    let s = &report["surfels"];
+    assert!(s["model_spilled_tiles"].as_u64() >= Some(2), "{s}");
+    let ply = std::fs::read(out.join("surfels.ply")).expect("surfels.ply");
+    let head = String::from_utf8_lossy(&ply[..ply.len().min(600)]).to_string();
+    let n = s["model_surfels"].as_u64().expect("model_surfels");
+    assert!(head.contains(&format!("element vertex {n}\n")), "{head}");
+    let body = ply.len() - head.find("end_header\n").expect("header") - "end_header\n".len();
+    assert_eq!(body as u64, n * 17 * 4, "every surfel read back");
     assert!(
         !tiles.exists(),
         "checkpoints are removed once the map is written"

@@ -593,11 +593,21 @@ fn a_failed_tile_keeps_the_finished_ones_and_the_run_resumes_from_checkpoints() 
     assert_eq!(a.tiles_done(), a.tiles.len());
 
     // Run B: a new process restores the two checkpoints and trains the rest only.
+    // As the CLI does, it writes its checkpoints into a directory and leaves each
+    // tile's surfels there (spilled) instead of holding them.
+    let dir = std::env::temp_dir().join(format!("rogs-spill-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
     let mut b2 = bundle(&m, &files);
     let mut r = pollster::block_on(TiledRun::new(&mut b2, cfg(), Some(t), ctx())).expect("run");
+    r.checkpoints = true;
+    r.spill_models(dir.clone());
     let planned = r.total_steps();
-    for (_, bytes) in &saved {
-        r.restore(bytes).expect("restore");
+    let mut order = Vec::new();
+    for (name, bytes) in &saved {
+        std::fs::write(dir.join(name), bytes).expect("write checkpoint");
+        r.restore_file(bytes, Some(&dir.join(name)))
+            .expect("restore");
+        order.push(name.clone());
     }
     assert!(
         r.total_steps() < planned,
@@ -607,9 +617,17 @@ fn a_failed_tile_keeps_the_finished_ones_and_the_run_resumes_from_checkpoints() 
     let twice = r.restore(&saved[0].1).expect_err("restored twice");
     assert!(twice.to_string().contains("twice"), "{twice}");
     let mut steps = 0;
+    let keep = |r: &mut TiledRun, order: &mut Vec<String>| {
+        while let Some((name, bytes)) = r.take_checkpoint() {
+            std::fs::write(dir.join(&name), bytes).expect("write checkpoint");
+            order.push(name);
+        }
+    };
     while pollster::block_on(r.step(&b2)).expect("step").is_some() {
+        keep(&mut r, &mut order);
         steps += 1;
     }
+    keep(&mut r, &mut order);
     assert_eq!(steps, r.steps_done());
     let resumed = pollster::block_on(r.finish(&b2, &mut |_, _| {})).expect("finish");
     let restored: Vec<_> = r
@@ -630,7 +648,46 @@ fn a_failed_tile_keeps_the_finished_ones_and_the_run_resumes_from_checkpoints() 
         trained_b < trained_a,
         "B trained {trained_b} steps, A {trained_a}"
     );
-    assert_eq!(resumed.params.len(), whole.params.len());
+    let (spilled, origin) = r.model();
+    assert_eq!(spilled.len(), whole.params.len());
+    assert_eq!(
+        spilled.held().len(),
+        0,
+        "B holds no finished tile's surfels"
+    );
+    assert_eq!(spilled.spilled_tiles(), order.len());
+
+    // B's model files, each tile read back from its checkpoint, are the files of a
+    // run that holds the same tiles' surfels (C restores B's checkpoints in B's order).
+    let mut streamed = rogs::export::ModelWriter::start(
+        |_| Ok(Vec::new()),
+        spilled.len(),
+        origin,
+        &b2.manifest,
+        Default::default(),
+    )
+    .expect("start");
+    spilled.write(&mut streamed).expect("read back");
+    let streamed = streamed.finish().expect("finish");
+    let mut b4 = bundle(&m, &files);
+    let mut c = pollster::block_on(TiledRun::new(&mut b4, cfg(), Some(t), ctx())).expect("run");
+    for name in &order {
+        c.restore(&std::fs::read(dir.join(name)).expect("read"))
+            .expect("restore");
+    }
+    let (held, origin_c) = c.model();
+    assert_eq!(held.held().len(), whole.params.len());
+    let whole_files =
+        rogs::export::model_files(held.held(), origin_c, &b4.manifest, Default::default());
+    assert_eq!(streamed.len(), whole_files.len());
+    for ((na, a), (nb, b)) in streamed.iter().zip(&whole_files) {
+        assert_eq!(na, nb);
+        assert!(
+            a == b,
+            "{na}: the spilled model's file differs from the held one's"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 
     // The resumed map is the uninterrupted one (tiles are independent jobs).
     let (cov, dz, psnr, cls) = agreement(&whole, &resumed);

@@ -234,11 +234,13 @@ pub fn merge(a: MergeArgs) -> Result<ExitCode, String> {
         Ok(v) => v,
         Err(code) => return Ok(code),
     };
+    // The tiles' surfels stay in their checkpoints until the model is written.
+    run.spill_models(a.tiles.clone());
     // In the plan's order: the order the single-process run adds its tiles in.
     for j in &plan.jobs {
         let p = checkpoint_path(&a.tiles, &j.tile);
         let bytes = std::fs::read(&p).map_err(|e| format!("cannot read {}: {e}", p.display()))?;
-        if let Err(e) = run.restore(&bytes) {
+        if let Err(e) = run.restore_file(&bytes, Some(&p)) {
             return bad(format!(
                 "{}: {e} (delete it and run its job again)",
                 p.display()

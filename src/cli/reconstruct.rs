@@ -360,6 +360,8 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
     let tiles_dir = a.out.join("tiles");
     if run.tiling.is_some() {
         run.checkpoints = true;
+        // The finished tiles' surfels are in their checkpoints: not held twice.
+        run.spill_models(tiles_dir.clone());
         if a.resume {
             match resume(&mut run, &tiles_dir) {
                 Ok(n) => eprintln!(
@@ -465,9 +467,7 @@ pub(super) fn write_map(
     let mut bar = Progress::new("BEV");
     let outcome = pollster::block_on(run.finish(b, &mut |d, t| bar.update(d, t)));
     bar.finish();
-    let (p, origin) = run.model();
-    let model = crate::export::model_files(p, origin, &b.manifest, ply_up);
-    write_files(out, &model)?;
+    let model = write_model(out, run, b, ply_up)?;
     let o = outcome.map_err(|e| {
         format!(
             "{e} (the trained model was written to {})",
@@ -494,11 +494,7 @@ pub(super) fn write_map(
             h.psnr_db, h.ipm_psnr_db, h.frames
         );
     }
-    eprintln!(
-        "wrote {} files to {}",
-        model.len() + files.len(),
-        out.display()
-    );
+    eprintln!("wrote {} files to {}", model + files.len(), out.display());
     Ok(())
 }
 
@@ -511,16 +507,15 @@ fn write_streamed(
     name: &str,
     ply_up: crate::export::ply::Up,
 ) -> Result<(), String> {
-    let (p, origin) = run.model();
-    let model = crate::export::model_files(p, origin, &b.manifest, ply_up);
-    write_files(out, &model)?;
+    let model = write_model(out, run, b, ply_up)?;
     let g = run.geometry;
+    let channels = run.model().0.channels();
     eprintln!(
         "the map is {}×{} px: its whole layers would take {} MiB, over the budget (--map-memory-mib), \
          so every layer is written tile by tile into map.rogsmap (no whole-image PNG or GeoTIFF layers)",
         g.width,
         g.height,
-        crate::tiles::Stitcher::bytes(&g, p.channels) >> 20
+        crate::tiles::Stitcher::bytes(&g, channels) >> 20
     );
     let mut bar = Progress::new("map");
     let done = pollster::block_on(run.finish_streamed(b, name, &mut |d, t| bar.update(d, t)));
@@ -550,11 +545,7 @@ fn write_streamed(
     if let Some(m) = &done.outcome.metrics {
         eprintln!("metrics: {}", serde_json::to_string(m).unwrap_or_default());
     }
-    eprintln!(
-        "wrote {} files to {}",
-        model.len() + files.len(),
-        out.display()
-    );
+    eprintln!("wrote {} files to {}", model + files.len(), out.display());
     Ok(())
 }
 
@@ -586,7 +577,7 @@ fn resume(run: &mut TiledRun, dir: &std::path::Path) -> Result<usize, String> {
     paths.sort();
     for p in &paths {
         let bytes = std::fs::read(p).map_err(|e| format!("cannot read {}: {e}", p.display()))?;
-        run.restore(&bytes).map_err(|e| {
+        run.restore_file(&bytes, Some(p)).map_err(|e| {
             format!(
                 "{}: {e} (delete the file to train its tile again)",
                 p.display()
@@ -622,6 +613,26 @@ fn positive_metres(s: &str) -> Result<f32, String> {
             "{s:?}: expected a positive number of metres, such as 0.3"
         )),
     }
+}
+
+/// Writes the model's files into `out` a tile at a time (tiles spilled to their
+/// checkpoints read back one by one); how many files.
+fn write_model(
+    out: &std::path::Path,
+    run: &TiledRun,
+    b: &Bundle,
+    up: crate::export::ply::Up,
+) -> Result<usize, String> {
+    let (m, origin) = run.model();
+    let open = |name: &str| {
+        let p = out.join(name);
+        std::fs::File::create(&p)
+            .map(std::io::BufWriter::new)
+            .map_err(|e| format!("cannot write {}: {e}", p.display()))
+    };
+    let mut w = crate::export::ModelWriter::start(open, m.len(), origin, &b.manifest, up)?;
+    m.write(&mut w)?;
+    Ok(w.finish()?.len())
 }
 
 fn write_files(dir: &std::path::Path, files: &[(String, Vec<u8>)]) -> Result<(), String> {

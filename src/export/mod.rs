@@ -112,7 +112,8 @@ pub fn elevation_error(o: &Outcome) -> Option<Vec<f32>> {
     )
 }
 
-/// The model's own files (surfels.ply and surfel_centres.f32), which need no BEV: the
+/// The model's own files (`surfels.ply`, `surfels_semantic.ply` for a labelled drive,
+/// and `surfel_centres.f32`: world x, y, z as f32 per surfel), which need no BEV: the
 /// CLI writes them as soon as training ends.
 pub fn model_files(
     p: &Params<f32>,
@@ -120,15 +121,111 @@ pub fn model_files(
     m: &Manifest,
     up: ply::Up,
 ) -> Vec<(String, Vec<u8>)> {
-    let centres: Vec<u8> = p
-        .pos
-        .iter()
-        .flat_map(|p| [0, 1, 2].map(|k| ((p[k] as f64 + origin[k]) as f32).to_le_bytes()))
-        .flatten()
-        .collect();
-    // Each surfel in the colour of its most likely class (channel k is class k of the
-    // table).
-    let classes: Vec<[u8; 3]> = (0..p.len())
+    // Writing to memory with the count given cannot fail.
+    ModelWriter::start(|_| Ok(Vec::new()), p.len(), origin, m, up)
+        .and_then(|mut w| {
+            w.add(p)?;
+            w.finish()
+        })
+        .unwrap_or_default()
+}
+
+/// `model_files` written a part at a time (a tiled run's finished tiles, read back
+/// one by one from their checkpoints): headers for `count` surfels in all, then each
+/// part's rows in order. The files are the same as `model_files` of the parts joined.
+pub struct ModelWriter<'a, W: std::io::Write> {
+    sinks: Vec<(String, W)>,
+    origin: [f64; 3],
+    up: ply::Up,
+    manifest: &'a Manifest,
+    count: usize,
+    written: usize,
+}
+
+impl<'a, W: std::io::Write> ModelWriter<'a, W> {
+    /// Opens each file with `open(name)` and writes the headers.
+    pub fn start(
+        mut open: impl FnMut(&str) -> Result<W, String>,
+        count: usize,
+        origin: [f64; 3],
+        m: &'a Manifest,
+        up: ply::Up,
+    ) -> Result<Self, String> {
+        let frame = m.frame_description();
+        let mut names = vec!["surfel_centres.f32", "surfels.ply"];
+        if m.labelled() {
+            names.push("surfels_semantic.ply");
+        }
+        let mut sinks = Vec::new();
+        for name in names {
+            let mut w = open(name)?;
+            if name.ends_with(".ply") {
+                w.write_all(ply::header(count, origin, up, &frame).as_bytes())
+                    .map_err(|e| format!("{name}: {e}"))?;
+            }
+            sinks.push((name.to_string(), w));
+        }
+        Ok(Self {
+            sinks,
+            origin,
+            up,
+            manifest: m,
+            count,
+            written: 0,
+        })
+    }
+
+    /// Appends the surfels of `p`.
+    pub fn add(&mut self, p: &Params<f32>) -> Result<(), String> {
+        self.written += p.len();
+        if self.written > self.count {
+            return Err(format!(
+                "the model has more surfels than the {} its files were started for",
+                self.count
+            ));
+        }
+        for (name, w) in &mut self.sinks {
+            let mut out = Vec::new();
+            match name.as_str() {
+                "surfel_centres.f32" => {
+                    for q in &p.pos {
+                        for (v, o) in q.iter().zip(self.origin) {
+                            out.extend_from_slice(&((*v as f64 + o) as f32).to_le_bytes());
+                        }
+                    }
+                }
+                "surfels.ply" => ply::push_rows(&mut out, p, self.up, None),
+                _ => {
+                    let classes = class_colours(p, self.manifest);
+                    ply::push_rows(&mut out, p, self.up, Some(&classes));
+                }
+            }
+            w.write_all(&out).map_err(|e| format!("{name}: {e}"))?;
+        }
+        Ok(())
+    }
+
+    /// The files, every surfel written.
+    pub fn finish(self) -> Result<Vec<(String, W)>, String> {
+        if self.written != self.count {
+            return Err(format!(
+                "the model's files were started for {} surfels, {} were written",
+                self.count, self.written
+            ));
+        }
+        let mut out = Vec::new();
+        for (name, mut w) in self.sinks {
+            w.flush().map_err(|e| format!("{name}: {e}"))?;
+            out.push((name, w));
+        }
+        Ok(out)
+    }
+}
+
+/// Each surfel in the colour of its most likely class (channel k is class k of the
+/// table).
+fn class_colours(p: &Params<f32>, m: &Manifest) -> Vec<[u8; 3]> {
+    (0..p.len())
         .map(|i| {
             let l = &p.logits[i * p.channels..(i + 1) * p.channels];
             let k = (0..l.len())
@@ -136,21 +233,7 @@ pub fn model_files(
                 .unwrap_or(0);
             m.semantic_classes.get(k).map_or([0, 0, 0], |c| c.color)
         })
-        .collect();
-    let mut out = vec![
-        ("surfel_centres.f32".into(), centres),
-        (
-            "surfels.ply".into(),
-            ply::surfels_ply(p, origin, up, None, &m.frame_description()),
-        ),
-    ];
-    if m.labelled() {
-        out.push((
-            "surfels_semantic.ply".into(),
-            ply::surfels_ply(p, origin, up, Some(&classes), &m.frame_description()),
-        ));
-    }
-    out
+        .collect()
 }
 
 /// The map's files (BEV layers and their geometry); with `model_files` and the report,

@@ -48,10 +48,21 @@ pub fn surfels_ply(
     colours: Option<&[[u8; 3]]>,
     frame: &str,
 ) -> Vec<u8> {
-    let props = [
-        "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0",
-        "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3",
-    ];
+    let mut out = header(p.len(), origin, up, frame).into_bytes();
+    out.reserve(p.len() * PROPS.len() * 4);
+    push_rows(&mut out, p, up, colours);
+    out
+}
+
+/// The properties of a row, in order.
+const PROPS: [&str; 17] = [
+    "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1",
+    "scale_2", "rot_0", "rot_1", "rot_2", "rot_3",
+];
+
+/// The header of a PLY of `count` surfels (`push_rows` writes them): a model written
+/// a tile at a time gives the same file as one written whole.
+pub fn header(count: usize, origin: [f64; 3], up: Up, frame: &str) -> String {
     let axes = match up {
         Up::Z => "comment up z: x east, y north, z up (the map's world frame)".to_string(),
         Up::Y => "comment up y: written (x, y, z) = world (x, z, -y), rotated -90 degrees about x"
@@ -59,14 +70,17 @@ pub fn surfels_ply(
     };
     let mut head = format!(
         "ply\nformat binary_little_endian 1.0\ncomment rogs surfels; world = local + origin {} {} {}\n{axes}\ncomment world frame: {}\nelement vertex {}\n",
-        origin[0], origin[1], origin[2], frame.replace('\n', " "), p.len()
+        origin[0], origin[1], origin[2], frame.replace('\n', " "), count
     );
-    for name in props {
+    for name in PROPS {
         head.push_str(&format!("property float {name}\n"));
     }
     head.push_str("end_header\n");
-    let mut out = head.into_bytes();
-    out.reserve(p.len() * props.len() * 4);
+    head
+}
+
+/// Appends one row per surfel of `p` (see `surfels_ply`).
+pub fn push_rows(out: &mut Vec<u8>, p: &Params<f32>, up: Up, colours: Option<&[[u8; 3]]>) {
     for i in 0..p.len() {
         let q = p.rotation[i];
         let norm = (q.iter().map(|v| v * v).sum::<f32>()).sqrt().max(1e-12);
@@ -113,5 +127,4 @@ pub fn surfels_ply(
             out.extend_from_slice(&v.to_le_bytes());
         }
     }
-    out
 }

@@ -145,28 +145,7 @@ pub fn encode(f: &Finished, fingerprint: u64) -> Result<Vec<u8>, String> {
 /// Reads a checkpoint; `Err` says which entry is wrong and what it should hold.
 /// Returns the tile and the fingerprint of the run that wrote it.
 pub fn decode(bytes: &[u8]) -> Result<(Finished, u64), String> {
-    let mut zip = zip::ZipArchive::new(Cursor::new(bytes))
-        .map_err(|e| format!("not a tile checkpoint (a zip with tile.json): {e}"))?;
-    let json = read_entry(&mut zip, "tile.json", None)?;
-    let h: Header = serde_json::from_slice(&json).map_err(|e| format!("tile.json: {e}"))?;
-    if h.format != FORMAT || h.version != VERSION {
-        return Err(format!(
-            "tile.json: format {:?} version {}, expected {FORMAT:?} version {VERSION}",
-            h.format, h.version
-        ));
-    }
-    let fingerprint = u64::from_str_radix(&h.fingerprint, 16)
-        .map_err(|_| format!("tile.json: fingerprint {:?} is not hex", h.fingerprint))?;
-    // Every count comes from the header: bound the arrays before reading them.
-    const MAX_PX: usize = 1 << 28;
-    const MAX_SURFELS: usize = 1 << 28;
-    const MAX_CHANNELS: usize = 256;
-    if h.channels > MAX_CHANNELS || h.surfels > MAX_SURFELS || h.centres > h.surfels {
-        return Err(format!(
-            "tile.json: {} surfels of {} channels and {} centres is out of range",
-            h.surfels, h.channels, h.centres
-        ));
-    }
+    let (mut zip, h, fingerprint) = open(bytes)?;
     let layers = match h.layers {
         None => None,
         Some([w, ht, ch]) => {
@@ -192,26 +171,7 @@ pub fn decode(bytes: &[u8]) -> Result<(Finished, u64), String> {
             })
         }
     };
-    let n = h.surfels;
-    let mut f32s = |name: &str, per: usize| read_f32(&mut zip, name, n * per);
-    let pos = f32s("surfels/pos.f32", 3)?;
-    let rgb = f32s("surfels/rgb.f32", 3)?;
-    let log_scale = f32s("surfels/log_scale.f32", 2)?;
-    let opacity = f32s("surfels/opacity.f32", 1)?;
-    let rotation = f32s("surfels/rotation.f32", 4)?;
-    let logits = f32s("surfels/logits.f32", h.channels)?;
-    let model = Params {
-        pos: pos.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
-        rgb: rgb.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
-        log_scale: log_scale.chunks_exact(2).map(|c| [c[0], c[1]]).collect(),
-        opacity,
-        rotation: rotation
-            .chunks_exact(4)
-            .map(|c| [c[0], c[1], c[2], c[3]])
-            .collect(),
-        logits,
-        channels: h.channels,
-    };
+    let model = read_model(&mut zip, &h)?;
     let raw = read_entry(&mut zip, "centres.f64", Some(h.centres * 24))?;
     let centres = raw
         .chunks_exact(24)
@@ -237,6 +197,68 @@ pub fn decode(bytes: &[u8]) -> Result<(Finished, u64), String> {
         holdout_views: h.holdout_views,
     };
     Ok((f, fingerprint))
+}
+
+/// The surfels of a checkpoint alone, checked as `decode` checks them: a tile whose
+/// model was left in its checkpoint (`TiledRun::spill_models`), read back to write
+/// the model's files.
+pub fn decode_model(bytes: &[u8]) -> Result<Params<f32>, String> {
+    let (mut zip, h, _) = open(bytes)?;
+    read_model(&mut zip, &h)
+}
+
+// Every count comes from the header: the arrays are bounded before they are read.
+const MAX_PX: usize = 1 << 28;
+const MAX_SURFELS: usize = 1 << 28;
+const MAX_CHANNELS: usize = 256;
+
+type Zip<'a> = zip::ZipArchive<Cursor<&'a [u8]>>;
+
+/// The checkpoint's zip, its header (checked) and the fingerprint it carries.
+fn open(bytes: &[u8]) -> Result<(Zip<'_>, Header, u64), String> {
+    let mut zip = zip::ZipArchive::new(Cursor::new(bytes))
+        .map_err(|e| format!("not a tile checkpoint (a zip with tile.json): {e}"))?;
+    let json = read_entry(&mut zip, "tile.json", None)?;
+    let h: Header = serde_json::from_slice(&json).map_err(|e| format!("tile.json: {e}"))?;
+    if h.format != FORMAT || h.version != VERSION {
+        return Err(format!(
+            "tile.json: format {:?} version {}, expected {FORMAT:?} version {VERSION}",
+            h.format, h.version
+        ));
+    }
+    let fingerprint = u64::from_str_radix(&h.fingerprint, 16)
+        .map_err(|_| format!("tile.json: fingerprint {:?} is not hex", h.fingerprint))?;
+    if h.channels > MAX_CHANNELS || h.surfels > MAX_SURFELS || h.centres > h.surfels {
+        return Err(format!(
+            "tile.json: {} surfels of {} channels and {} centres is out of range",
+            h.surfels, h.channels, h.centres
+        ));
+    }
+    Ok((zip, h, fingerprint))
+}
+
+/// The tile's surfels (`surfels/*.f32`).
+fn read_model(zip: &mut Zip<'_>, h: &Header) -> Result<Params<f32>, String> {
+    let n = h.surfels;
+    let mut f32s = |name: &str, per: usize| read_f32(zip, name, n * per);
+    let pos = f32s("surfels/pos.f32", 3)?;
+    let rgb = f32s("surfels/rgb.f32", 3)?;
+    let log_scale = f32s("surfels/log_scale.f32", 2)?;
+    let opacity = f32s("surfels/opacity.f32", 1)?;
+    let rotation = f32s("surfels/rotation.f32", 4)?;
+    let logits = f32s("surfels/logits.f32", h.channels)?;
+    Ok(Params {
+        pos: pos.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        rgb: rgb.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        log_scale: log_scale.chunks_exact(2).map(|c| [c[0], c[1]]).collect(),
+        opacity,
+        rotation: rotation
+            .chunks_exact(4)
+            .map(|c| [c[0], c[1], c[2], c[3]])
+            .collect(),
+        logits,
+        channels: h.channels,
+    })
 }
 
 /// Entry `name`, which must hold exactly `len` bytes when `len` is given (checked

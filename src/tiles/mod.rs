@@ -25,6 +25,7 @@
 pub mod checkpoint;
 mod files;
 pub mod jobs;
+mod model;
 pub mod stitch;
 mod streamed;
 pub mod tile;
@@ -32,6 +33,7 @@ pub mod tile;
 pub use files::{
     finish_lazy, hold, start_files, start_lazy, step_lazy, tile_files, Fetch, Fetched,
 };
+pub use model::FinishedModel;
 pub use stitch::{Stitcher, Window};
 pub use streamed::StreamedMap;
 pub use tile::Tile;
@@ -391,8 +393,9 @@ pub struct TiledRun {
     truth: Option<BevRaster>,
     stitch: Stitcher,
     recorded: bool,
-    /// Every finished tile's core surfels, in the frame shifted by `model_origin`.
-    model: Params<f32>,
+    /// Every finished tile's core surfels, in the frame shifted by `model_origin`
+    /// (held, or natively left in the tiles' checkpoints: `spill_models`).
+    model: FinishedModel,
     pub model_origin: [f64; 3],
     centres: Vec<[f64; 3]>,
     holdout: HoldoutSums,
@@ -481,10 +484,7 @@ impl TiledRun {
             stitch: Stitcher::new(BevGeometry::around(std::iter::empty(), 1.0, 0.0), 1, 0.0),
             truth,
             recorded: false,
-            model: Params {
-                channels,
-                ..Default::default()
-            },
+            model: FinishedModel::new(channels),
             model_origin: [0.0; 3],
             centres: Vec::new(),
             holdout: HoldoutSums::default(),
@@ -753,7 +753,7 @@ impl TiledRun {
                                 .map_err(GpuError::Failed)?,
                         ));
                     }
-                    self.apply(skipped);
+                    self.apply(skipped, None);
                 }
                 Err(e) if e.not_loaded().is_some() => {
                     // Not a failure: this tile starts again once its files are there.
@@ -843,13 +843,16 @@ impl TiledRun {
             restored: false,
             host_bytes: None,
         };
+        let mut file = None;
         if self.checkpoints && tile.is_some() && s.stopped.is_none() {
+            let name = format!("{}{}", done.report.name, checkpoint::SUFFIX);
+            file = self.model.spill_to.as_ref().map(|d| d.join(&name));
             self.pending.push_back((
-                format!("{}{}", done.report.name, checkpoint::SUFFIX),
+                name,
                 checkpoint::encode(&done, self.fingerprint).map_err(GpuError::Failed)?,
             ));
         }
-        self.apply(done);
+        self.apply(done, file);
         self.recorded = true;
         Ok(())
     }
@@ -866,16 +869,15 @@ impl TiledRun {
         }
     }
 
-    /// Adds a finished tile to the map, the model, the metrics and the report.
-    fn apply(&mut self, f: Finished) {
+    /// Adds a finished tile to the map, the model, the metrics and the report;
+    /// `file`: its checkpoint's path, where its surfels may be left (`spill_models`).
+    fn apply(&mut self, f: Finished, file: Option<std::path::PathBuf>) {
         let tile = self.tiling.and(self.tiles.get(f.index));
         if let (Some(l), Some(w)) = (&f.layers, self.window_of(Some(f.index))) {
             let blend = tile.map(|t| (t.rect, 2.0 * self.tiling.map_or(0.0, |c| c.overlap_m)));
             self.stitch.add(&w, l, blend);
         }
-        let shift = [0.0; 3];
-        let all: Vec<usize> = (0..f.model.len()).collect();
-        append(&mut self.model, &f.model, &all, shift);
+        self.model.add(&f.model, file);
         self.z_change.0 += f.z_change.0;
         self.z_change.1 += f.z_change.1;
         self.initial_error.0 += f.initial_error.0;
@@ -929,6 +931,16 @@ impl TiledRun {
     /// Returns the tile's name. A checkpoint of another run, of a tile not in the
     /// plan, or a damaged one is refused with what is wrong and changes nothing.
     pub fn restore(&mut self, bytes: &[u8]) -> Result<String, ReconstructError> {
+        self.restore_file(bytes, None)
+    }
+
+    /// As `restore`, from the checkpoint file at `path` (read into `bytes`): with
+    /// `spill_models` the tile's surfels are left there.
+    pub fn restore_file(
+        &mut self,
+        bytes: &[u8],
+        path: Option<&std::path::Path>,
+    ) -> Result<String, ReconstructError> {
         let bad = |problem: String| ReconstructError::Checkpoint(problem);
         if self.tiling.is_none() {
             return Err(bad(
@@ -971,8 +983,8 @@ impl TiledRun {
         let channels_ok = f
             .layers
             .as_ref()
-            .is_none_or(|l| l.bev.channels == self.model.channels)
-            && (f.model.is_empty() || f.model.channels == self.model.channels);
+            .is_none_or(|l| l.bev.channels == self.model.channels())
+            && (f.model.is_empty() || f.model.channels == self.model.channels());
         if want != got || !channels_ok {
             return Err(bad(format!(
                 "tile {name}'s layers are {got:?} px, the map's window for it is {want:?} px"
@@ -981,7 +993,8 @@ impl TiledRun {
         let planned = self.planned_steps_of(tile);
         self.planned_steps = self.planned_steps.saturating_sub(planned);
         f.report.restored = true;
-        self.apply(f);
+        let file = path.filter(|_| self.model.spill_to.is_some());
+        self.apply(f, file.map(|p| p.to_path_buf()));
         Ok(name)
     }
 
@@ -1078,8 +1091,15 @@ impl TiledRun {
     }
 
     /// The model of the tiles finished so far, and its origin.
-    pub fn model(&self) -> (&Params<f32>, [f64; 3]) {
+    pub fn model(&self) -> (&FinishedModel, [f64; 3]) {
         (&self.model, self.model_origin)
+    }
+
+    /// Natively: the surfels of each tile checkpointed into `dir` (where the caller
+    /// writes `take_checkpoint`'s files before the model is written) stay there
+    /// instead of in memory; `FinishedModel::write` reads them back.
+    pub fn spill_models(&mut self, dir: std::path::PathBuf) {
+        self.model.spill_to = Some(dir);
     }
 
     /// The map: the blended layers of every finished tile, scored. Tiles not run
@@ -1096,7 +1116,7 @@ impl TiledRun {
         let t = Instant::now();
         let g = self.geometry;
         let min_alpha = self.cfg.train.loss.min_alpha;
-        let channels = self.model.channels;
+        let channels = self.model.channels();
         let stitch = std::mem::replace(&mut self.stitch, Stitcher::new(g, channels, min_alpha));
         let layers = stitch.finish();
         let holdout = self.holdout.holdout(self.holdout_views);
@@ -1104,7 +1124,15 @@ impl TiledRun {
         // cells on the 3.7 km `long`) goes with it rather than being copied.
         let mut o = Outcome::assemble(
             b,
-            self.model.clone(),
+            // The whole model when it is held (the page); its files are written
+            // from `model()`.
+            match self.model.spilled_tiles() {
+                0 => self.model.held().clone(),
+                _ => Params {
+                    channels,
+                    ..Default::default()
+                },
+            },
             g,
             layers,
             self.truth.take(),
@@ -1226,6 +1254,7 @@ impl TiledRun {
                 "added_surfels": sum(|t| t.added_surfels),
                 "base_surfels": sum(|t| t.surfels) - sum(|t| t.added_surfels),
                 "model_surfels": self.model.len(),
+                "model_spilled_tiles": self.model.spilled_tiles(),
             });
             r["steps"] = steps.into();
             r["training_views"] = sum(|t| t.training_views).into();

@@ -123,7 +123,7 @@ impl TiledRun {
         let outcome = Outcome {
             params: Params::default(),
             geometry: g,
-            bev: BevImage::blank(0, 0, self.model.channels),
+            bev: BevImage::blank(0, 0, self.model.channels()),
             raster: BevRaster::empty(g.origin, g.resolution, 0, 0),
             confidence: Vec::new(),
             density: Vec::new(),
@@ -138,7 +138,7 @@ impl TiledRun {
             "blocks": blocks.len(),
             "block_px": BLOCK,
             "held_bytes": self.stitch.held_bytes(),
-            "whole_layers_bytes": Stitcher::bytes(&g, self.model.channels),
+            "whole_layers_bytes": Stitcher::bytes(&g, self.model.channels()),
         });
         // Pass 2: the map file, each level-0 tile from its block.
         let index = map_file::run_index(m, &g, self.truth.is_some(), range);

@@ -223,7 +223,8 @@ impl Reconstruction {
         };
         // Kept for export even if the BEV failed.
         let (p, origin) = self.run.model();
-        self.files = crate::export::model_files(p, origin, &self.bundle.manifest, self.ply_up);
+        self.files =
+            crate::export::model_files(p.held(), origin, &self.bundle.manifest, self.ply_up);
         let o = o.map_err(err)?;
         let mut files = crate::export::files(&o, &self.bundle.manifest).map_err(err)?;
         let r = self

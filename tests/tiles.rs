@@ -677,6 +677,10 @@ fn a_failed_tile_keeps_the_finished_ones_and_the_run_resumes_from_checkpoints() 
     }
     let (held, origin_c) = c.model();
     assert_eq!(held.held().len(), whole.params.len());
+    // And the seen centres the elevation metrics read.
+    let centres = spilled.centres().expect("read back");
+    assert!(!centres.is_empty());
+    assert_eq!(centres, held.centres().expect("held"));
     let whole_files =
         rogs::export::model_files(held.held(), origin_c, &b4.manifest, Default::default());
     assert_eq!(streamed.len(), whole_files.len());

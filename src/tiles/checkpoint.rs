@@ -172,14 +172,7 @@ pub fn decode(bytes: &[u8]) -> Result<(Finished, u64), String> {
         }
     };
     let model = read_model(&mut zip, &h)?;
-    let raw = read_entry(&mut zip, "centres.f64", Some(h.centres * 24))?;
-    let centres = raw
-        .chunks_exact(24)
-        .map(|c| {
-            let v = |k: usize| f64::from_le_bytes(c[8 * k..8 * k + 8].try_into().unwrap_or([0; 8]));
-            [v(0), v(1), v(2)]
-        })
-        .collect();
+    let centres = read_centres(&mut zip, &h)?;
     let f = Finished {
         index: h.index,
         report: h.report,
@@ -199,12 +192,12 @@ pub fn decode(bytes: &[u8]) -> Result<(Finished, u64), String> {
     Ok((f, fingerprint))
 }
 
-/// The surfels of a checkpoint alone, checked as `decode` checks them: a tile whose
-/// model was left in its checkpoint (`TiledRun::spill_models`), read back to write
-/// the model's files.
-pub fn decode_model(bytes: &[u8]) -> Result<Params<f32>, String> {
+/// The surfels and the seen centres of a checkpoint alone, checked as `decode`
+/// checks them: a tile whose model was left in its checkpoint
+/// (`TiledRun::spill_models`), read back to write the model's files and score it.
+pub fn decode_model(bytes: &[u8]) -> Result<(Params<f32>, Vec<[f64; 3]>), String> {
     let (mut zip, h, _) = open(bytes)?;
-    read_model(&mut zip, &h)
+    Ok((read_model(&mut zip, &h)?, read_centres(&mut zip, &h)?))
 }
 
 // Every count comes from the header: the arrays are bounded before they are read.
@@ -259,6 +252,18 @@ fn read_model(zip: &mut Zip<'_>, h: &Header) -> Result<Params<f32>, String> {
         logits,
         channels: h.channels,
     })
+}
+
+/// World centres of the core surfels some view saw (`centres.f64`).
+fn read_centres(zip: &mut Zip<'_>, h: &Header) -> Result<Vec<[f64; 3]>, String> {
+    let raw = read_entry(zip, "centres.f64", Some(h.centres * 24))?;
+    Ok(raw
+        .chunks_exact(24)
+        .map(|c| {
+            let v = |k: usize| f64::from_le_bytes(c[8 * k..8 * k + 8].try_into().unwrap_or([0; 8]));
+            [v(0), v(1), v(2)]
+        })
+        .collect())
 }
 
 /// Entry `name`, which must hold exactly `len` bytes when `len` is given (checked

@@ -397,7 +397,6 @@ pub struct TiledRun {
     /// (held, or natively left in the tiles' checkpoints: `spill_models`).
     model: FinishedModel,
     pub model_origin: [f64; 3],
-    centres: Vec<[f64; 3]>,
     holdout: HoldoutSums,
     holdout_views: usize,
     z_change: (f64, usize),
@@ -486,7 +485,6 @@ impl TiledRun {
             recorded: false,
             model: FinishedModel::new(channels),
             model_origin: [0.0; 3],
-            centres: Vec::new(),
             holdout: HoldoutSums::default(),
             holdout_views: 0,
             z_change: (0.0, 0),
@@ -877,12 +875,11 @@ impl TiledRun {
             let blend = tile.map(|t| (t.rect, 2.0 * self.tiling.map_or(0.0, |c| c.overlap_m)));
             self.stitch.add(&w, l, blend);
         }
-        self.model.add(&f.model, file);
+        self.model.add(&f.model, &f.centres, file);
         self.z_change.0 += f.z_change.0;
         self.z_change.1 += f.z_change.1;
         self.initial_error.0 += f.initial_error.0;
         self.initial_error.1 += f.initial_error.1;
-        self.centres.extend_from_slice(&f.centres);
         self.holdout.merge(&f.holdout);
         self.holdout_views += f.holdout_views;
         if let Some(d) = self.done.get_mut(f.index) {
@@ -1120,6 +1117,7 @@ impl TiledRun {
         let stitch = std::mem::replace(&mut self.stitch, Stitcher::new(g, channels, min_alpha));
         let layers = stitch.finish();
         let holdout = self.holdout.holdout(self.holdout_views);
+        let centres = self.model.centres().map_err(ReconstructError::Checkpoint)?;
         // The blend is handed over above, so a run finishes once: the truth (30 M
         // cells on the 3.7 km `long`) goes with it rather than being copied.
         let mut o = Outcome::assemble(
@@ -1136,7 +1134,7 @@ impl TiledRun {
             g,
             layers,
             self.truth.take(),
-            &self.centres,
+            &centres,
             holdout,
             min_alpha,
         )?;

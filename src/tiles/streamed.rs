@@ -110,8 +110,9 @@ impl TiledRun {
         }
         let range = if lo > hi { (0.0, 1.0) } else { (lo, hi) };
         let road_ids = crate::eval::road_classes(m);
+        let centres = self.model.centres().map_err(ReconstructError::Checkpoint)?;
         let metrics = self.truth.as_ref().map(|t| {
-            let mut m = tally.metrics(&road_ids, elevation_vs_raster(&self.centres, t));
+            let mut m = tally.metrics(&road_ids, elevation_vs_raster(&centres, t));
             m.initial_elevation_rmse_m = self.initial_rmse();
             // Of the whole truth: blocks where no tile rendered hold truth cells too.
             let cells = t.valid.pixels().filter(|v| v.0[0] != 0).count();

@@ -23,3 +23,21 @@ export async function openBench(bundle) {
   };
   return { base, bundleUrl: `bench/${path.basename(bundle)}`, browser, close };
 }
+
+/** The page's `bench_raster` (src/render/bench.rs) on one view of `bundle`, parsed. */
+export async function benchRasterInPage(bundle, frame, view, runs, resolution) {
+  const { base, bundleUrl, browser, close } = await openBench(bundle);
+  try {
+    const page = await browser.newPage();
+    await page.goto(base);
+    const json = await page.evaluate(async ([url, f, v, n, res]) => {
+      const m = await import('/pkg/rogs.js');
+      await m.default();
+      const bytes = new Uint8Array(await (await fetch(url)).arrayBuffer());
+      return m.bench_raster(bytes, f, v, n, res);
+    }, [`/${bundleUrl}`, Number(frame), Number(view), Number(runs), Number(resolution)]);
+    return { browser: await browser.version(), ...JSON.parse(json) };
+  } finally {
+    await close();
+  }
+}

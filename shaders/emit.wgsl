@@ -1,4 +1,5 @@
-//! emit: one (key, slot) pair per candidate–tile overlap, at the candidate's offset
+//! emit: one (key, slot) pair per candidate–tile overlap (the tiles of its box that
+//! `footprint_mask` kept), at the candidate's offset
 //! from the prefix sum of tile counts. Pairs come out in slot order, which is surfel
 //! order; the stable radix
 //! sort then orders them by key = tile index in the high bits, quantised depth in the
@@ -31,14 +32,21 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let top = (1u << bits) - 1u;
     let d = clamp((depth - view.near) / (view.far - view.near), 0.0, 1.0);
     let q = min(u32(d * f32(top)), top);
+    // The box's tiles the footprint touches (project.wgsl, `footprint_mask`).
+    let mask = bitcast<u32>(proj[o + 15u]);
+    let all = (tx1 - tx0) * (ty1 - ty0) > MASK_TILES;
     var k = offsets[i];
+    var j = 0u;
     for (var ty = ty0; ty < ty1; ty++) {
         for (var tx = tx0; tx < tx1; tx++) {
-            if k < grid.y {
-                keys[k] = ((ty * view.tiles_x + tx) << bits) | q;
-                values[k] = i;
+            if all || (mask & (1u << j)) != 0u {
+                if k < grid.y {
+                    keys[k] = ((ty * view.tiles_x + tx) << bits) | q;
+                    values[k] = i;
+                }
+                k++;
             }
-            k++;
+            j++;
         }
     }
 }

@@ -1,6 +1,7 @@
 //! project: per surfel, cull to the box in front of the camera, transform centre,
 //! tangent axes and normal to camera space, project the centre, and bound the ±3σ
-//! footprint (and the ±2 px low-pass floor) in tiles. Also bounds, in pixels, where the
+//! footprint (and the ±2 px low-pass floor) in tiles, keeping of that box the tiles
+//! the projected parallelogram itself touches (`footprint_mask`). Also bounds, in pixels, where the
 //! surfel can reach alpha ≥ 1/255 at all (±3.5σ and ±2.5 px, see `reach_rect`), so that
 //! the compositing kernels skip far pixels of a tile with four compares instead of a
 //! ray–plane evaluation: a pure speed-up that changes no output. Writes the projected surfel and
@@ -50,6 +51,47 @@ fn reach_rect(pc: vec3<f32>, tu: vec3<f32>, tv: vec3<f32>, su: f32, sv: f32, mu:
     return vec4<f32>(lo, hi);
 }
 
+/// Which tiles of the box t = [x0, y0, x1, y1) the footprint touches, bit j for the
+/// box's j-th tile in row-major order: the projected ±3σ parallelogram `q` or the
+/// ±2 px square around `mu`; a tile is dropped when all four of its corners lie
+/// strictly outside one edge of the parallelogram. Boxes of more than MASK_TILES
+/// tiles, and a parallelogram reaching behind the camera (`whole`), keep them all.
+/// Exactly `footprint_mask` in src/render/project.rs.
+fn footprint_mask(t: vec4<u32>, q: array<vec2<f32>, 4>, mu: vec2<f32>, whole: bool) -> u32 {
+    let n = (t.z - t.x) * (t.w - t.y);
+    if whole || n > MASK_TILES {
+        return 0xffffffffu;
+    }
+    let e1 = q[1] - q[0];
+    let e2 = q[2] - q[0];
+    let e3 = q[3] - q[0];
+    let area = (e1.x * e2.y - e1.y * e2.x) + (e2.x * e3.y - e2.y * e3.x);
+    let sgn = select(-1.0, 1.0, area >= 0.0);
+    let size = f32(TILE);
+    var mask = 0u;
+    var j = 0u;
+    for (var ty = t.y; ty < t.w; ty++) {
+        for (var tx = t.x; tx < t.z; tx++) {
+            let lo = vec2<f32>(f32(tx) * size, f32(ty) * size);
+            let hi = lo + vec2<f32>(size);
+            let square = mu.x + 2.0 >= lo.x && mu.x - 2.0 <= hi.x && mu.y + 2.0 >= lo.y && mu.y - 2.0 <= hi.y;
+            var separated = false;
+            for (var e = 0u; e < 4u; e++) {
+                let p = q[e];
+                let d = q[(e + 1u) % 4u] - p;
+                let nrm = vec2<f32>(-d.y * sgn, d.x * sgn);
+                let m = max(max(dot(nrm, lo - p), dot(nrm, vec2<f32>(hi.x, lo.y) - p)), max(dot(nrm, vec2<f32>(lo.x, hi.y) - p), dot(nrm, hi - p)));
+                separated = separated || m < 0.0;
+            }
+            if square || !separated {
+                mask |= 1u << j;
+            }
+            j++;
+        }
+    }
+    return mask;
+}
+
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let slot = gid.x + gid.y * grid.x;
@@ -76,12 +118,17 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let mu = vec2<f32>(view.fx * pc.x / pc.z + view.cx, view.fy * pc.y / pc.z + view.cy);
     var lo = mu - vec2<f32>(2.0);
     var hi = mu + vec2<f32>(2.0);
+    // The corners in order around the parallelogram: (-,-), (+,-), (+,+), (-,+).
+    var q: array<vec2<f32>, 4>;
+    var whole = false;
     for (var c = 0u; c < 4u; c++) {
-        let a = select(-1.0, 1.0, (c & 1u) != 0u);
-        let b = select(-1.0, 1.0, (c & 2u) != 0u);
+        let a = select(-1.0, 1.0, c == 1u || c == 2u);
+        let b = select(-1.0, 1.0, c >= 2u);
         let corner = pc + a * EXTENT_SIGMA * su * tu + b * EXTENT_SIGMA * sv * tv;
+        whole = whole || corner.z < 0.1 * view.near;
         let cz = max(corner.z, 0.1 * view.near);
         let uv = vec2<f32>(view.fx * corner.x / cz + view.cx, view.fy * corner.y / cz + view.cy);
+        q[c] = uv;
         lo = min(lo, uv);
         hi = max(hi, uv);
     }
@@ -95,6 +142,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let ty0 = u32(clamp(floor(lo.y / t), 0.0, f32(view.tiles_y)));
     let tx1 = u32(clamp(floor(hi.x / t), 0.0, f32(view.tiles_x - 1u))) + 1u;
     let ty1 = u32(clamp(floor(hi.y / t), 0.0, f32(view.tiles_y - 1u))) + 1u;
+    let mask = footprint_mask(vec4<u32>(tx0, ty0, tx1, ty1), q, mu, whole);
     let o = PROJ_STRIDE * slot;
     proj[o] = pc.x;
     proj[o + 1u] = pc.y;
@@ -111,14 +159,17 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     proj[o + 12u] = n.x;
     proj[o + 13u] = n.y;
     proj[o + 14u] = n.z;
-    proj[o + 15u] = reach.x;
+    proj[o + 15u] = bitcast<f32>(mask);
     proj[o + 16u] = mu.x;
     proj[o + 17u] = mu.y;
     // Tile bounds fit 16 bits (at most 65535 tiles per axis), packed in pairs.
     proj[o + 18u] = bitcast<f32>(tx0 | (ty0 << 16u));
     proj[o + 19u] = bitcast<f32>(tx1 | (ty1 << 16u));
-    proj[o + 20u] = reach.y;
-    proj[o + 21u] = reach.z;
-    proj[o + 22u] = reach.w;
-    tile_count[slot] = (tx1 - tx0) * (ty1 - ty0);
+    // The reach rectangle last, as one aligned vec4 (`load_reach`).
+    proj[o + 20u] = reach.x;
+    proj[o + 21u] = reach.y;
+    proj[o + 22u] = reach.z;
+    proj[o + 23u] = reach.w;
+    let box_tiles = (tx1 - tx0) * (ty1 - ty0);
+    tile_count[slot] = select(countOneBits(mask), box_tiles, box_tiles > MASK_TILES);
 }

@@ -36,7 +36,7 @@
 //! Oracle: src/render/rasterize.rs.
 
 @group(0) @binding(0) var<uniform> view: View;
-@group(0) @binding(1) var<storage, read> proj: array<f32>;
+@group(0) @binding(1) var<storage, read> proj: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> order: array<u32>;
 @group(0) @binding(3) var<storage, read> ranges: array<u32>;
 // Per candidate slot: colour 3, then the logits (the view's copy, `gather.wgsl`).
@@ -166,6 +166,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
         }
         let id = order[k];
         let reach = load_reach(id);
+        // The four pixels' column against the reach rectangle first: one test
+        // rejects most pairs of a tile for all four.
+        if out_of_column(reach, a.at.x, a.at.y, d.at.y) {
+            continue;
+        }
         // Non-short-circuit `|`: every pixel's test must run.
         if !(near(&a, reach) | near(&b, reach) | near(&c, reach) | near(&d, reach)) {
             continue;

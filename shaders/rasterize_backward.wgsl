@@ -29,7 +29,7 @@
 //! Oracle: src/render/rasterize_backward.rs; slot layout `slot::*` there.
 
 @group(0) @binding(1) var<uniform> view: View;
-@group(0) @binding(2) var<storage, read> proj: array<f32>;
+@group(0) @binding(2) var<storage, read> proj: array<vec4<f32>>;
 @group(0) @binding(3) var<storage, read> order: array<u32>;
 @group(0) @binding(4) var<storage, read> ranges: array<u32>;
 // Per candidate slot: colour 3, then the logits (the view's copy, `gather.wgsl`).
@@ -249,8 +249,18 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
     for (var k = hi; k > r.x; k--) {
         let id = order[k - 1u];
         let reach = load_reach(id);
-        // Non-short-circuit `|`: every pixel's test must run.
-        var any = reach_test(&a, k, reach) | reach_test(&b, k, reach) | reach_test(&c, k, reach) | reach_test(&d, k, reach);
+        // The four pixels' column against the reach rectangle first (one test rejects
+        // most pairs for all four), then each pixel; non-short-circuit `|`: every
+        // pixel's test must run. No `continue` before `lanes_any`: lanes stay in step.
+        var any = false;
+        if !out_of_column(reach, a.at.x, a.at.y, d.at.y) {
+            any = reach_test(&a, k, reach) | reach_test(&b, k, reach) | reach_test(&c, k, reach) | reach_test(&d, k, reach);
+        } else {
+            a.live = false;
+            b.live = false;
+            c.live = false;
+            d.live = false;
+        }
         var s = Surfel();
         if any {
             s = load_surfel(id);

@@ -1,5 +1,7 @@
 //! Shared declarations of the rasteriser kernels: the view uniform and the layout of
-//! a projected surfel (24 floats, so that one surfel is six 16-byte loads).
+//! a projected surfel (24 floats, so that one surfel is six 16-byte loads). `TILE`
+//! (the tile side) and `MASK_TILES` (the largest tile box whose tiles are listed one
+//! by one, `footprint_mask`) are generated from src/render and prepended.
 
 struct View {
     w2c0: vec4<f32>,
@@ -35,7 +37,6 @@ const PROJ_STRIDE: u32 = 24u;
 const PIX_STRIDE: u32 = 10u;
 /// Per-pixel loss gradients: rgb 3, depth, alpha.
 const GRAD_STRIDE: u32 = 5u;
-const TILE: u32 = 8u;
 const MIN_ALPHA: f32 = 0.003921569;
 const MAX_ALPHA: f32 = 0.99;
 const MIN_TRANSMITTANCE: f32 = 0.0001;
@@ -57,6 +58,12 @@ struct Surfel {
 /// Whether pixel (px, py) lies outside a surfel's reach rectangle (x0, y0, x1, y1).
 fn out_of_reach(r: vec4<f32>, px: f32, py: f32) -> bool {
     return px < r.x || py < r.y || px > r.z || py > r.w;
+}
+
+/// Whether the column of pixels at x from rows y0 to y1 (pixel centres) lies wholly
+/// outside a reach rectangle: `out_of_reach` for each of them, in one test.
+fn out_of_column(r: vec4<f32>, px: f32, y0: f32, y1: f32) -> bool {
+    return px < r.x || px > r.z || y1 < r.y || y0 > r.w;
 }
 
 /// One surfel evaluated at one pixel (see src/render/rasterize.rs, `Eval`).

@@ -3,6 +3,7 @@
 
 use rogs::gpu::scatter_add::{scatter_add_cpu, scatter_add_gpu};
 use rogs::gpu::{AccumStrategy, GpuContext};
+use rogs::render::probe::{blobs, dense_blend_cpu, DenseBlend};
 
 fn ctx() -> GpuContext {
     match GpuContext::new_blocking() {
@@ -71,4 +72,23 @@ fn scatter_add_native_atomics_match_cpu_where_available() {
         return;
     }
     check(AccumStrategy::NativeF32);
+}
+
+#[test]
+fn the_platform_probe_matches_its_oracle() {
+    let c = ctx();
+    // An image size that is not a multiple of the 8×8 workgroup.
+    let (w, h) = (37, 21);
+    let list = blobs(w, h, 48);
+    let gpu = pollster::block_on(DenseBlend::new(&c, w, h, &list).run(&c)).expect("gpu");
+    let cpu = dense_blend_cpu(w, h, &list);
+    assert_eq!(gpu.len(), cpu.len());
+    // The blend covers the image: little transmittance is left anywhere.
+    assert!(
+        cpu.chunks(4).all(|p| p[3] < 0.9),
+        "the probe's blobs cover the image"
+    );
+    for (i, (g, c)) in gpu.iter().zip(&cpu).enumerate() {
+        assert!((g - c).abs() <= 1e-4, "value {i}: gpu {g} cpu {c}");
+    }
 }

@@ -5,6 +5,7 @@
 use rogs::bundle::{example, write_zip, Bundle, Limits, Problem};
 use rogs::gpu::scatter_add::{scatter_add_cpu, scatter_add_gpu};
 use rogs::gpu::{AccumStrategy, GpuContext};
+use rogs::render::probe::{blobs, dense_blend_cpu, DenseBlend};
 use wasm_bindgen_test::*;
 
 wasm_bindgen_test_configure!(run_in_browser);
@@ -34,6 +35,25 @@ async fn webgpu_adapter_found_and_scatter_add_matches_cpu() {
             (g - c).abs() <= 1e-3 * max_mag.max(1.0),
             "bin {b}: gpu {g} cpu {c}"
         );
+    }
+}
+
+#[wasm_bindgen_test]
+async fn the_platform_probe_matches_its_oracle_in_the_browser() {
+    let ctx = match GpuContext::new().await {
+        Ok(c) => c,
+        Err(e) => panic!("WebGPU adapter required: {e}"),
+    };
+    let (w, h) = (37, 21);
+    let list = blobs(w, h, 48);
+    let gpu = DenseBlend::new(&ctx, w, h, &list)
+        .run(&ctx)
+        .await
+        .expect("gpu");
+    let cpu = dense_blend_cpu(w, h, &list);
+    assert_eq!(gpu.len(), cpu.len());
+    for (i, (g, c)) in gpu.iter().zip(&cpu).enumerate() {
+        assert!((g - c).abs() <= 1e-4, "value {i}: gpu {g} cpu {c}");
     }
 }
 

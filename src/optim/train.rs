@@ -333,7 +333,7 @@ impl Trainer {
                 &ctx,
                 "regularise",
                 &[
-                    VIEW_WGSL,
+                    &VIEW_WGSL,
                     GUARD_WGSL,
                     &per,
                     RegParams::WGSL,

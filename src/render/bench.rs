@@ -103,6 +103,20 @@ pub async fn raster_view(
         gpu_both.push(gpu_seconds(ctx, &mut timer).await?);
         pairs = f.pairs.unwrap_or(0);
     }
+    // The platform probe at the view's size, timed the same way.
+    let probe = super::probe::DenseBlend::new(
+        ctx,
+        cam.width,
+        cam.height,
+        &super::probe::blobs(cam.width, cam.height, super::probe::BENCH_BLOBS),
+    );
+    let (mut probe_wall, mut probe_gpu) = (Vec::new(), Vec::new());
+    for _ in 0..o.runs.max(1) {
+        let t = now();
+        probe.run(ctx).await.map_err(err)?;
+        probe_wall.push(now() - t);
+        probe_gpu.push(gpu_seconds(ctx, &mut timer).await?);
+    }
     // Pixel×surfel pairs: every pair of a tile against the tile's pixels (an upper
     // bound on evaluations: early termination skips some).
     let evaluations = pairs as u64 * (TILE * TILE) as u64;
@@ -130,6 +144,16 @@ pub async fn raster_view(
             "forward_backward_pairs_per_s": evaluations as f64 / gb,
             "kernels_s_total": t.sorted(),
         })),
+        // The platform's own speed: a dense blend with no lists, sort or atomics
+        // (src/render/probe.rs); compare its ratio between adapters with the
+        // rasteriser's. The wall time includes reading the image back.
+        "probe": {
+            "kernel": "dense_blend",
+            "blobs": super::probe::BENCH_BLOBS,
+            "pixels": npx,
+            "wall_s": median(probe_wall),
+            "gpu_s": timer.as_ref().map(|_| median(probe_gpu)),
+        },
         "runs": o.runs.max(1),
         // The keys `rogs bench step` shares, for scripts comparing runs: a step here
         // is one forward and backward pass of the view (median); no epoch.
@@ -138,7 +162,8 @@ pub async fn raster_view(
         "surfels": all.len(),
         "candidates_per_view": sub.len(),
         "pairs": pairs,
-        // Kernel name → GPU ms per run (a forward pass, then a forward and backward).
+        // Kernel name → GPU ms per run (a forward pass, then a forward and backward,
+        // then the probe).
         "kernels_ms": timer.as_ref().map(|t| t
             .sorted()
             .into_iter()

@@ -29,7 +29,15 @@ use crate::gpu::readback::{read_bytes, read_f32};
 use crate::gpu::{AccumStrategy, GpuContext, GpuError};
 
 /// The `View` uniform and the shared rasteriser declarations.
-pub const VIEW_WGSL: &str = include_str!("../../shaders/view.wgsl");
+/// shaders/view.wgsl behind the constants it shares with the oracle, generated from
+/// their Rust declarations so that the two cannot disagree.
+pub static VIEW_WGSL: std::sync::LazyLock<String> = std::sync::LazyLock::new(|| {
+    format!(
+        "const TILE: u32 = {TILE}u;\nconst MASK_TILES: u32 = {}u;\n{}",
+        super::project::MASK_TILES,
+        include_str!("../../shaders/view.wgsl")
+    )
+});
 const LOAD_SURFEL_WGSL: &str = include_str!("../../shaders/load_surfel.wgsl");
 /// `usable(x)`: the gradient test behind the optimiser's status word.
 pub const GUARD_WGSL: &str = include_str!("../../shaders/guard.wgsl");
@@ -203,7 +211,7 @@ impl GpuRasterizer {
         let me = Self {
             project: pipe(
                 "project",
-                &[VIEW_WGSL, include_str!("../../shaders/project.wgsl")],
+                &[&VIEW_WGSL, include_str!("../../shaders/project.wgsl")],
                 "main",
             ),
             scan_blocks: pipe("scan_blocks", &[scan], "scan_blocks"),
@@ -216,19 +224,19 @@ impl GpuRasterizer {
             ),
             emit: pipe(
                 "emit",
-                &[VIEW_WGSL, include_str!("../../shaders/emit.wgsl")],
+                &[&VIEW_WGSL, include_str!("../../shaders/emit.wgsl")],
                 "main",
             ),
             ranges: pipe(
                 "tile_ranges",
-                &[VIEW_WGSL, include_str!("../../shaders/tile_ranges.wgsl")],
+                &[&VIEW_WGSL, include_str!("../../shaders/tile_ranges.wgsl")],
                 "main",
             ),
             raster: pipe(
                 "rasterize",
                 &[
                     &ch,
-                    VIEW_WGSL,
+                    &VIEW_WGSL,
                     LOAD_SURFEL_WGSL,
                     include_str!("../../shaders/rasterize.wgsl"),
                 ],
@@ -241,7 +249,7 @@ impl GpuRasterizer {
                     lanes,
                     &ch,
                     strategy.wgsl(),
-                    VIEW_WGSL,
+                    &VIEW_WGSL,
                     LOAD_SURFEL_WGSL,
                     include_str!("../../shaders/rasterize_backward.wgsl"),
                 ],
@@ -250,7 +258,7 @@ impl GpuRasterizer {
             project_bwd: pipe(
                 "project_backward",
                 &[
-                    VIEW_WGSL,
+                    &VIEW_WGSL,
                     GUARD_WGSL,
                     include_str!("../../shaders/project_backward.wgsl"),
                 ],

@@ -1,7 +1,7 @@
 //! Stage 4: the differentiable 2D-surfel rasteriser.
 //!
 //! Per view: cull the surfels to a box in front of the camera, project them, bin them
-//! into 16×16 pixel tiles, order each tile's surfels by depth, and composite front to
+//! into 8×8 pixel tiles, order each tile's surfels by depth, and composite front to
 //! back. Each surfel is evaluated where the pixel ray meets its plane (2DGS), with a
 //! screen-space low-pass floor so that far, small surfels stay visible and smooth.
 //!
@@ -15,6 +15,7 @@ pub mod candidates;
 pub mod check;
 pub mod from_bundle;
 pub mod gpu;
+pub mod probe;
 pub mod project;
 pub mod project_backward;
 pub mod rasterize;

@@ -105,17 +105,18 @@ impl FinishedModel {
         self.each(&mut |p, _| w.add(p))
     }
 
-    /// The seen centres of every tile, in order (spilled tiles' read back).
-    pub fn centres(&self) -> Result<Vec<[f64; 3]>, String> {
+    /// The seen centres of every tile, in order (spilled tiles' read back; borrowed
+    /// when every tile is held, as in the page).
+    pub fn centres(&self) -> Result<std::borrow::Cow<'_, [[f64; 3]]>, String> {
         if self.spilled_tiles() == 0 {
-            return Ok(self.held_centres.clone());
+            return Ok(std::borrow::Cow::Borrowed(&self.held_centres));
         }
         let mut out = Vec::new();
         self.each(&mut |_, c| {
             out.extend_from_slice(c);
             Ok(())
         })?;
-        Ok(out)
+        Ok(std::borrow::Cow::Owned(out))
     }
 
     /// `f(surfels, centres)` for each tile in order.

@@ -3,8 +3,9 @@
 //! front to back, evaluating each where its ray meets the surfel's plane
 //! (`eval_surfel`); a pixel stops once its transmittance would drop below 1e-4, the
 //! invocation when all four have. Four pixels share each surfel's loads (list entry,
-//! reach, projected parameters, colour, logits), as in `rasterize_backward`, and are
-//! named variables rather than an array, which SwiftShader would keep in memory. A
+//! reach, projected parameters, colour, logits), as in `rasterize_backward`; their
+//! state is held as vec4 lanes (lane j = row 4j' + j), not a struct per pixel nor an
+//! array, either of which SwiftShader keeps in memory. A
 //! four-compare reach test (`out_of_reach`) comes before the
 //! evaluation: most pairs of a far tile are out of reach, and pixels that never
 //! saturate (sky, road beyond the far plane) walk the whole list. Measured on lavapipe:
@@ -51,94 +52,65 @@
 
 var<workgroup> range: vec2<u32>;
 
-/// One pixel's compositing state and its use of the current surfel.
-struct Pixel {
-    pix: u32,
-    at: vec2<f32>,
-    // Still compositing: inside the view and the loss, transmittance not yet spent.
-    on: bool,
+/// Whether pixel (x, y) composites at all: inside the view and, in training, the loss.
+fn starts(x: u32, y: u32) -> bool {
+    if x >= view.width || y >= view.height {
+        return false;
+    }
+    return view.masked == 0u || (target_px[y * view.width + x] >> 24u) != 255u;
+}
+
+/// The surfel's alpha at the four pixels (px, ys[j]): `eval_surfel` for four rows at
+/// once.
+fn alpha4(s: Surfel, px: f32, ys: vec4<f32>) -> vec4<f32> {
+    let dx = (px - view.cx) / view.fx;
+    let dy = (ys - view.cy) / view.fy;
+    let nd = s.n.x * dx + s.n.y * dy + s.n.z;
+    let np = dot(s.n, s.pc);
+    // Edge-on (the ray runs in the plane) or behind: no ray hit; the low-pass decides.
+    let flat = abs(nd) > vec4<f32>(1e-6);
+    let l = np / select(vec4<f32>(1.0), nd, flat);
+    let hit = flat & (l > vec4<f32>(0.0));
+    let qx = dx * l - s.pc.x;
+    let qy = dy * l - s.pc.y;
+    let qz = l - s.pc.z;
+    let u = (qx * s.tu.x + qy * s.tu.y + qz * s.tu.z) / s.su;
+    let v = (qx * s.tv.x + qy * s.tv.y + qz * s.tv.z) / s.sv;
+    let rho3 = select(vec4<f32>(BIG), u * u + v * v, hit);
+    let ddx = px - s.mu.x;
+    let ddy = ys - s.mu.y;
+    let rho2 = LOWPASS_INV_SQ * (ddx * ddx + ddy * ddy);
+    let rho = select(rho2, rho3, rho3 < rho2);
+    return min(s.opacity * exp(-0.5 * rho), vec4<f32>(MAX_ALPHA));
+}
+
+/// One pixel's state when the walk ends, lane j of the four.
+struct Done {
     t: f32,
     c: vec3<f32>,
     depth: f32,
-    last_k: u32,
-    // The sum of the weights (`view.average`).
     wsum: f32,
-    // The current surfel: whether it is composited here, and its weight.
-    live: bool,
-    w: f32,
+    last_k: u32,
 }
 
-fn start_pixel(x: u32, y: u32) -> Pixel {
-    var p = Pixel();
-    p.at = vec2<f32>(f32(x) + 0.5, f32(y) + 0.5);
-    p.t = 1.0;
-    if x < view.width && y < view.height {
-        p.pix = y * view.width + x;
-        p.on = view.masked == 0u || (target_px[p.pix] >> 24u) != 255u;
-    }
-    return p;
-}
-
-/// The reach test: whether the surfel may cover a pixel still compositing.
-fn near(p: ptr<function, Pixel>, reach: vec4<f32>) -> bool {
-    (*p).live = (*p).on && !out_of_reach(reach, (*p).at.x, (*p).at.y);
-    return (*p).live;
-}
-
-/// Evaluates the surfel at list position k for a pixel that passed the reach test:
-/// whether it is composited (the pixel stops instead when it would saturate).
-fn weigh(p: ptr<function, Pixel>, s: Surfel, k: u32) -> bool {
-    if !(*p).live {
-        return false;
-    }
-    let e = eval_surfel(s, (*p).at.x, (*p).at.y, view);
-    (*p).live = false;
-    if e.alpha < MIN_ALPHA {
-        return false;
-    }
-    let t_next = (*p).t * (1.0 - e.alpha);
-    let average = view.average != 0u;
-    if t_next < MIN_TRANSMITTANCE && !average {
-        (*p).on = false;
-        return false;
-    }
-    (*p).live = true;
-    (*p).w = select(e.alpha * (*p).t, e.alpha, average);
-    (*p).wsum += (*p).w;
-    (*p).t = t_next;
-    (*p).last_k = k + 1u;
-    return true;
-}
-
-fn blend(p: ptr<function, Pixel>, col: vec3<f32>, z: f32) {
-    if (*p).live {
-        (*p).c += col * (*p).w;
-        (*p).depth += z * (*p).w;
-    }
-}
-
-/// The pixel's weight of the current surfel (0 where it is not composited).
-fn weight(p: Pixel) -> f32 {
-    return select(0.0, p.w, p.live);
-}
-
-/// Writes pixel j's outputs; `l` holds the four pixels' logits (lane j is this one).
-fn finish(p: Pixel, x: u32, y: u32, gain: f32, l: ptr<function, array<vec4<f32>, CH_ARRAY>>, j: u32) {
+/// Writes pixel (x, y)'s outputs; lane j of `l` holds its logits.
+fn finish(x: u32, y: u32, p: Done, gain: f32, l: ptr<function, array<vec4<f32>, CH_ARRAY>>, j: u32) {
     if x >= view.width || y >= view.height {
         return;
     }
+    let pix = y * view.width + x;
     // The weighted mean scaled by the coverage (`view.average`), else the sums as they are.
     var scale = 1.0;
     if view.average != 0u && p.wsum > 0.0 {
         scale = (1.0 - p.t) / p.wsum;
     }
     for (var q = 0u; q < CH; q++) {
-        out_logits[p.pix * CH + q] = (*l)[q][j] * scale;
+        out_logits[pix * CH + q] = (*l)[q][j] * scale;
     }
-    let o = PIX_STRIDE * p.pix;
-    for (var j = 0u; j < 3u; j++) {
-        px_out[o + j] = gain * p.c[j] * scale + view.exposure_b;
-        px_out[o + 7u + j] = p.c[j] * scale;
+    let o = PIX_STRIDE * pix;
+    for (var i = 0u; i < 3u; i++) {
+        px_out[o + i] = gain * p.c[i] * scale + view.exposure_b;
+        px_out[o + 7u + i] = p.c[i] * scale;
     }
     px_out[o + 3u] = p.depth * scale;
     px_out[o + 4u] = 1.0 - p.t;
@@ -155,44 +127,65 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
         range = vec2<u32>(ranges[2u * tile], ranges[2u * tile + 1u]);
     }
     let r = workgroupUniformLoad(&range);
-    var a = start_pixel(x, y);
-    var b = start_pixel(x, y + 1u);
-    var c = start_pixel(x, y + 2u);
-    var d = start_pixel(x, y + 3u);
+    let px = f32(x) + 0.5;
+    let ys = vec4<f32>(f32(y) + 0.5, f32(y) + 1.5, f32(y) + 2.5, f32(y) + 3.5);
+    // The four pixels' state, lane j for row y + j: plain vec4 variables rather than a
+    // struct per pixel, which SwiftShader kept out of registers (the walk over the
+    // list cost five times the bare walk there; docs/PERFORMANCE.md).
+    var on = vec4<bool>(starts(x, y), starts(x, y + 1u), starts(x, y + 2u), starts(x, y + 3u));
+    var t = vec4<f32>(1.0);
+    var cr = vec4<f32>(0.0);
+    var cg = vec4<f32>(0.0);
+    var cb = vec4<f32>(0.0);
+    var depth = vec4<f32>(0.0);
+    var wsum = vec4<f32>(0.0);
+    var last_k = vec4<u32>(0u);
+    let average = view.average != 0u;
     var l: array<vec4<f32>, CH_ARRAY>;
     for (var k = r.x; k < r.y; k++) {
-        if !(a.on || b.on || c.on || d.on) {
+        if !any(on) {
             break;
         }
         let id = order[k];
         let reach = load_reach(id);
-        // The four pixels' column against the reach rectangle first: one test
-        // rejects most pairs of a tile for all four.
-        if out_of_column(reach, a.at.x, a.at.y, d.at.y) {
+        // The column against the reach rectangle (`out_of_column`), then each pixel.
+        if out_of_column(reach, px, ys.x, ys.w) {
             continue;
         }
-        // Non-short-circuit `|`: every pixel's test must run.
-        if !(near(&a, reach) | near(&b, reach) | near(&c, reach) | near(&d, reach)) {
+        let off_x = px < reach.x || px > reach.z;
+        var live = on & !(vec4<bool>(off_x) | (ys < vec4<f32>(reach.y)) | (ys > vec4<f32>(reach.w)));
+        if !any(live) {
             continue;
         }
         let s = load_surfel(id);
-        if !(weigh(&a, s, k) | weigh(&b, s, k) | weigh(&c, s, k) | weigh(&d, s, k)) {
+        let alpha = alpha4(s, px, ys);
+        live = live & (alpha >= vec4<f32>(MIN_ALPHA));
+        let t_next = t * (1.0 - alpha);
+        // A pixel stops instead when the surfel would saturate it.
+        if !average {
+            let stop = live & (t_next < vec4<f32>(MIN_TRANSMITTANCE));
+            on = on & !stop;
+            live = live & !stop;
+        }
+        if !any(live) {
             continue;
         }
+        let w = select(vec4<f32>(0.0), select(alpha * t, alpha, average), live);
+        wsum += w;
+        t = select(t, t_next, live);
+        last_k = select(last_k, vec4<u32>(k + 1u), live);
         let o = (3u + CH) * id;
-        let col = vec3<f32>(attrs[o], attrs[o + 1u], attrs[o + 2u]);
-        blend(&a, col, s.pc.z);
-        blend(&b, col, s.pc.z);
-        blend(&c, col, s.pc.z);
-        blend(&d, col, s.pc.z);
-        let w = vec4<f32>(weight(a), weight(b), weight(c), weight(d));
+        cr += attrs[o] * w;
+        cg += attrs[o + 1u] * w;
+        cb += attrs[o + 2u] * w;
+        depth += s.pc.z * w;
         for (var q = 0u; q < CH; q++) {
             l[q] += attrs[o + 3u + q] * w;
         }
     }
     let gain = exp(view.exposure_a);
-    finish(a, x, y, gain, &l, 0u);
-    finish(b, x, y + 1u, gain, &l, 1u);
-    finish(c, x, y + 2u, gain, &l, 2u);
-    finish(d, x, y + 3u, gain, &l, 3u);
+    finish(x, y, Done(t.x, vec3<f32>(cr.x, cg.x, cb.x), depth.x, wsum.x, last_k.x), gain, &l, 0u);
+    finish(x, y + 1u, Done(t.y, vec3<f32>(cr.y, cg.y, cb.y), depth.y, wsum.y, last_k.y), gain, &l, 1u);
+    finish(x, y + 2u, Done(t.z, vec3<f32>(cr.z, cg.z, cb.z), depth.z, wsum.z, last_k.z), gain, &l, 2u);
+    finish(x, y + 3u, Done(t.w, vec3<f32>(cr.w, cg.w, cb.w), depth.w, wsum.w, last_k.w), gain, &l, 3u);
 }

@@ -1,13 +1,14 @@
 //! rasterize (forward): one workgroup per 8×8 tile; each invocation composites four
 //! pixels of a column (rows 4j to 4j + 3) through its tile's depth-sorted surfels
-//! front to back, evaluating each where its ray meets the surfel's plane
-//! (`eval_surfel`); a pixel stops once its transmittance would drop below 1e-4, the
-//! invocation when all four have. Four pixels share each surfel's loads (list entry,
-//! reach, projected parameters, colour, logits), as in `rasterize_backward`; their
-//! state is held as vec4 lanes (lane j = row 4j' + j), not a struct per pixel nor an
-//! array, either of which SwiftShader keeps in memory. A
-//! four-compare reach test (`out_of_reach`) comes before the
-//! evaluation: most pairs of a far tile are out of reach, and pixels that never
+//! front to back, evaluating each where its ray meets the surfel's plane (`eval4`
+//! in view.wgsl, four rows at once); a pixel stops once its transmittance would
+//! drop below 1e-4, the invocation when all four have. Four pixels share each
+//! surfel's loads (list entry, reach, projected parameters, colour, logits), as in
+//! `rasterize_backward`; their state is held as vec4 lanes (lane j = row 4j' + j),
+//! not a struct per pixel nor an array, either of which SwiftShader keeps in memory
+//! (with a struct per pixel this pass took 2.2 times as long in Chromium). A column
+//! test and a four-compare reach test per pixel (`out_of_column`, then the pixels'
+//! rows) come before the evaluation: most pairs of a far tile are out of reach, and pixels that never
 //! saturate (sky, road beyond the far plane) walk the whole list. Measured on lavapipe:
 //! 8×8 tiles halve the time of 16×16 ones (pixels that never saturate walk fewer
 //! surfels; 4×4 loses it again to the extra pairs), and staging the list in workgroup
@@ -58,30 +59,6 @@ fn starts(x: u32, y: u32) -> bool {
         return false;
     }
     return view.masked == 0u || (target_px[y * view.width + x] >> 24u) != 255u;
-}
-
-/// The surfel's alpha at the four pixels (px, ys[j]): `eval_surfel` for four rows at
-/// once.
-fn alpha4(s: Surfel, px: f32, ys: vec4<f32>) -> vec4<f32> {
-    let dx = (px - view.cx) / view.fx;
-    let dy = (ys - view.cy) / view.fy;
-    let nd = s.n.x * dx + s.n.y * dy + s.n.z;
-    let np = dot(s.n, s.pc);
-    // Edge-on (the ray runs in the plane) or behind: no ray hit; the low-pass decides.
-    let flat = abs(nd) > vec4<f32>(1e-6);
-    let l = np / select(vec4<f32>(1.0), nd, flat);
-    let hit = flat & (l > vec4<f32>(0.0));
-    let qx = dx * l - s.pc.x;
-    let qy = dy * l - s.pc.y;
-    let qz = l - s.pc.z;
-    let u = (qx * s.tu.x + qy * s.tu.y + qz * s.tu.z) / s.su;
-    let v = (qx * s.tv.x + qy * s.tv.y + qz * s.tv.z) / s.sv;
-    let rho3 = select(vec4<f32>(BIG), u * u + v * v, hit);
-    let ddx = px - s.mu.x;
-    let ddy = ys - s.mu.y;
-    let rho2 = LOWPASS_INV_SQ * (ddx * ddx + ddy * ddy);
-    let rho = select(rho2, rho3, rho3 < rho2);
-    return min(s.opacity * exp(-0.5 * rho), vec4<f32>(MAX_ALPHA));
 }
 
 /// One pixel's state when the walk ends, lane j of the four.
@@ -158,7 +135,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
             continue;
         }
         let s = load_surfel(id);
-        let alpha = alpha4(s, px, ys);
+        let alpha = eval4(s, px, ys, view).alpha;
         live = live & (alpha >= vec4<f32>(MIN_ALPHA));
         let t_next = t * (1.0 - alpha);
         // A pixel stops instead when the surfel would saturate it.

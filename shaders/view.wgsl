@@ -55,58 +55,57 @@ struct Surfel {
     mu: vec2<f32>,
 }
 
-/// Whether pixel (px, py) lies outside a surfel's reach rectangle (x0, y0, x1, y1).
-fn out_of_reach(r: vec4<f32>, px: f32, py: f32) -> bool {
-    return px < r.x || py < r.y || px > r.z || py > r.w;
-}
-
 /// Whether the column of pixels at x from rows y0 to y1 (pixel centres) lies wholly
-/// outside a reach rectangle: `out_of_reach` for each of them, in one test.
+/// outside a reach rectangle (x0, y0, x1, y1), in one test.
 fn out_of_column(r: vec4<f32>, px: f32, y0: f32, y1: f32) -> bool {
     return px < r.x || px > r.z || y1 < r.y || y0 > r.w;
 }
 
-/// One surfel evaluated at one pixel (see src/render/rasterize.rs, `Eval`).
-struct Eval {
-    d: vec3<f32>,
-    lambda: f32,
-    q: vec3<f32>,
-    u: f32,
-    v: f32,
-    delta: vec2<f32>,
-    ray_hit: bool,
-    g: f32,
-    raw_alpha: f32,
-    alpha: f32,
+/// A surfel evaluated at four pixels of a column, (px, ys[j]) in lane j, where each
+/// pixel's ray meets the surfel's plane (2DGS), with the screen-space low-pass floor
+/// (see src/render/rasterize.rs, `Eval`). The forward pass reads `alpha` alone; the
+/// rest is what the backward pass differentiates.
+struct Eval4 {
+    dx: f32,
+    dy: vec4<f32>,
+    lambda: vec4<f32>,
+    qx: vec4<f32>,
+    qy: vec4<f32>,
+    qz: vec4<f32>,
+    u: vec4<f32>,
+    v: vec4<f32>,
+    ddx: f32,
+    ddy: vec4<f32>,
+    ray_hit: vec4<bool>,
+    g: vec4<f32>,
+    raw_alpha: vec4<f32>,
+    alpha: vec4<f32>,
 }
 
-fn eval_surfel(s: Surfel, px: f32, py: f32, view: View) -> Eval {
-    var e: Eval;
-    e.d = vec3<f32>((px - view.cx) / view.fx, (py - view.cy) / view.fy, 1.0);
-    let nd = dot(s.n, e.d);
+fn eval4(s: Surfel, px: f32, ys: vec4<f32>, view: View) -> Eval4 {
+    var e: Eval4;
+    e.dx = (px - view.cx) / view.fx;
+    e.dy = (ys - view.cy) / view.fy;
+    let nd = s.n.x * e.dx + s.n.y * e.dy + s.n.z;
     let np = dot(s.n, s.pc);
-    e.lambda = 0.0;
-    e.q = vec3<f32>(0.0);
-    e.u = 0.0;
-    e.v = 0.0;
-    var rho3 = BIG;
     // Edge-on (the ray runs in the plane) or behind: no ray hit; the low-pass decides.
-    if abs(nd) > 1e-6 {
-        let l = np / nd;
-        if l > 0.0 {
-            e.lambda = l;
-            e.q = e.d * l - s.pc;
-            e.u = dot(e.q, s.tu) / s.su;
-            e.v = dot(e.q, s.tv) / s.sv;
-            rho3 = e.u * e.u + e.v * e.v;
-        }
-    }
-    e.delta = vec2<f32>(px - s.mu.x, py - s.mu.y);
-    let rho2 = LOWPASS_INV_SQ * (e.delta.x * e.delta.x + e.delta.y * e.delta.y);
+    let flat = abs(nd) > vec4<f32>(1e-6);
+    let l = np / select(vec4<f32>(1.0), nd, flat);
+    let hit = flat & (l > vec4<f32>(0.0));
+    e.lambda = select(vec4<f32>(0.0), l, hit);
+    e.qx = select(vec4<f32>(0.0), e.dx * l - s.pc.x, hit);
+    e.qy = select(vec4<f32>(0.0), e.dy * l - s.pc.y, hit);
+    e.qz = select(vec4<f32>(0.0), l - s.pc.z, hit);
+    e.u = (e.qx * s.tu.x + e.qy * s.tu.y + e.qz * s.tu.z) / s.su;
+    e.v = (e.qx * s.tv.x + e.qy * s.tv.y + e.qz * s.tv.z) / s.sv;
+    let rho3 = select(vec4<f32>(BIG), e.u * e.u + e.v * e.v, hit);
+    e.ddx = px - s.mu.x;
+    e.ddy = ys - s.mu.y;
+    let rho2 = LOWPASS_INV_SQ * (e.ddx * e.ddx + e.ddy * e.ddy);
     e.ray_hit = rho3 < rho2;
     let rho = select(rho2, rho3, e.ray_hit);
     e.g = exp(-0.5 * rho);
     e.raw_alpha = s.opacity * e.g;
-    e.alpha = min(e.raw_alpha, MAX_ALPHA);
+    e.alpha = min(e.raw_alpha, vec4<f32>(MAX_ALPHA));
     return e;
 }

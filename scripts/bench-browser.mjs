@@ -26,16 +26,26 @@ export async function openBench(bundle) {
 
 /** The page's `bench_raster` (src/render/bench.rs) on one view of `bundle`, parsed. */
 export async function benchRasterInPage(bundle, frame, view, runs, resolution) {
+  return benchInPage(bundle, 'bench_raster', [Number(frame), Number(view), Number(runs), Number(resolution)]);
+}
+
+/** The page's `bench_step` (src/optim/bench.rs) on `bundle`, parsed. */
+export async function benchStepInPage(bundle, steps, resolution, halfWidth) {
+  return benchInPage(bundle, 'bench_step', [Number(steps), Number(resolution), Number(halfWidth)]);
+}
+
+/** The engine's export `name` called with the bundle's bytes and `args`, its JSON parsed. */
+async function benchInPage(bundle, name, args) {
   const { base, bundleUrl, browser, close } = await openBench(bundle);
   try {
     const page = await browser.newPage();
     await page.goto(base);
-    const json = await page.evaluate(async ([url, f, v, n, res]) => {
+    const json = await page.evaluate(async ([url, f, a]) => {
       const m = await import('/pkg/rogs.js');
       await m.default();
       const bytes = new Uint8Array(await (await fetch(url)).arrayBuffer());
-      return m.bench_raster(bytes, f, v, n, res);
-    }, [`/${bundleUrl}`, Number(frame), Number(view), Number(runs), Number(resolution)]);
+      return m[f](bytes, ...a);
+    }, [`/${bundleUrl}`, name, args]);
     return { browser: await browser.version(), ...JSON.parse(json) };
   } finally {
     await close();

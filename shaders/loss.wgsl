@@ -1,9 +1,11 @@
 //! loss (photometric and semantic): per pixel of a rendered view, the masked L1 on RGB
 //! and the cross-entropy of the composited logits against the image's class, and
 //! their gradients with respect to the forward outputs (`g_px`, `g_logits`), which
-//! `rasterize_backward` consumes. One invocation per pixel; each workgroup reduces
-//! its loss sums in workgroup memory and writes one partial pair, so the host reads a
-//! few kilobytes, not an image.
+//! `rasterize_backward` consumes. One invocation per pixel, which writes its two loss
+//! terms; `partial_sums` reduces them to a pair per 256 pixels, so the host reads a
+//! few kilobytes, not an image. No workgroup memory and no barrier: where a CPU runs
+//! workgroups (SwiftShader), a barrier alone made this kernel 16× slower than on
+//! lavapipe.
 //!
 //! The target is packed per pixel as r | g << 8 | b << 16 | class << 24 (class = dense
 //! channel index, 255 = outside the loss mask). Pixels the model leaves uncovered
@@ -11,10 +13,11 @@
 //! surfel there could learn from them.
 //!
 //! Two checks guard the step that follows (guard.wgsl, `adam` applies nothing when
-//! `status[0]` is raised): a loss sum that is not `usable` raises 1, and a view whose
-//! surfel–tile pairs overflowed the capacity the host gave the forward pass (`total`
-//! beyond `capacity`: the image lacks pairs) raises 2; the host then renders the view
-//! again with the exact count (src/optim/train.rs). Checking here, on the GPU, lets the
+//! `status[0]` is raised): a loss sum that is not `usable` raises 1 (in
+//! `partial_sums`), and a view whose surfel–tile pairs overflowed the capacity the
+//! host gave the forward pass (`total` beyond `capacity`: the image lacks pairs)
+//! raises 2; the host then renders the view again with the exact count
+//! (src/optim/train.rs). Checking here, on the GPU, lets the
 //! whole step run without waiting for the count.
 //!
 //! Oracle: src/loss/photometric.rs.
@@ -27,7 +30,8 @@
 @group(0) @binding(3) var<storage, read> target_px: array<u32>;
 @group(0) @binding(4) var<storage, read_write> g_px: array<f32>;
 @group(0) @binding(5) var<storage, read_write> g_logits: array<f32>;
-@group(0) @binding(6) var<storage, read_write> partial: array<f32>;
+// The pixel's (L1, cross-entropy) terms, summed by `partial_sums`.
+@group(0) @binding(6) var<storage, read_write> terms: array<vec2<f32>>;
 @group(0) @binding(7) var<storage, read_write> status: array<u32>;
 // The forward pass's pair count (scan.wgsl), before any clamping to the capacity.
 @group(0) @binding(8) var<storage, read> total: array<u32>;
@@ -35,10 +39,8 @@
 const PIX_STRIDE: u32 = 10u;
 const GRAD_STRIDE: u32 = 5u;
 
-var<workgroup> red: array<vec2<f32>, 256>;
-
 @compute @workgroup_size(256)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let i = gid.x + gid.y * lp.row;
     let ch = lp.channels;
     var l = vec2<f32>(0.0);
@@ -88,23 +90,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wg
             }
         }
     }
-    red[li] = l;
-    workgroupBarrier();
-    for (var off = 128u; off > 0u; off = off / 2u) {
-        if li < off {
-            red[li] += red[li + off];
-        }
-        workgroupBarrier();
+    if i < lp.width * lp.height {
+        terms[i] = l;
     }
-    if li == 0u {
-        let w = wg.x + wg.y * (lp.row / 256u);
-        partial[2u * w] = red[0].x;
-        partial[2u * w + 1u] = red[0].y;
-        if !(usable(red[0].x) && usable(red[0].y)) {
-            status[0] = 1u;
-        }
-        if w == 0u && total[0] > lp.capacity {
-            status[0] = 2u;
-        }
+    if i == 0u && total[0] > lp.capacity {
+        status[0] = 2u;
     }
 }

@@ -70,7 +70,6 @@ struct Pass {
 // counters[d * COLS + t]: thread t's count of digit d (`count`), then the output
 // slot of its next key of digit d (`scatter`).
 var<workgroup> counters: array<u32, 4096>; // 256 * COLS
-var<workgroup> sums: array<u32, 256>;
 var<workgroup> tile: array<u32, 2048>; // SCAN_BLOCK
 
 // The count from the GPU, never past the bound key buffers (bound with the capacity
@@ -98,23 +97,6 @@ fn digit_of(key: u32) -> u32 {
 
 fn group_index(wid: vec3<u32>, nwg: vec3<u32>) -> u32 {
     return wid.x + wid.y * nwg.x;
-}
-
-// Exclusive scan of one value per thread (Hillis-Steele in `sums`); afterwards
-// `sums[WG - 1]` holds the total until the next barrier-free write to `sums`.
-fn workgroup_exclusive_scan(t: u32, v: u32) -> u32 {
-    sums[t] = v;
-    workgroupBarrier();
-    for (var off = 1u; off < WG; off <<= 1u) {
-        var x = 0u;
-        if t >= off {
-            x = sums[t - off];
-        }
-        workgroupBarrier();
-        sums[t] += x;
-        workgroupBarrier();
-    }
-    return sums[t] - v;
 }
 
 // Zeroes the counters, then thread t counts the digits of its run into its column.
@@ -173,16 +155,10 @@ fn scan_reduce(
             acc += hist[i];
         }
     }
-    sums[t] = acc;
-    workgroupBarrier();
-    for (var stride = WG / 2u; stride > 0u; stride >>= 1u) {
-        if t < stride {
-            sums[t] += sums[t + stride];
-        }
-        workgroupBarrier();
-    }
+    // The tile's sum: the total of the workgroup's scan (workgroup.wgsl).
+    let total = workgroup_scan(t, acc).y;
     if t == 0u {
-        partials[s] = sums[0];
+        partials[s] = total;
     }
 }
 
@@ -197,12 +173,12 @@ fn scan_partials(@builtin(local_invocation_index) t: u32) {
         if i < tiles {
             v = partials[i];
         }
-        let ex = workgroup_exclusive_scan(t, v);
+        let ex = workgroup_scan(t, v);
         if i < tiles {
-            partials[i] = carry + ex;
+            partials[i] = carry + ex.x;
         }
-        carry += sums[WG - 1u];
-        // Everyone has read the total before the next round overwrites `sums`.
+        carry += ex.y;
+        // Everyone has read the scan before the next round overwrites it.
         workgroupBarrier();
     }
 }
@@ -235,7 +211,7 @@ fn scan_down(
     for (var k = 0u; k < SCAN_ITEMS; k++) {
         sum += tile[own + k];
     }
-    var run = partials[s] + workgroup_exclusive_scan(t, sum);
+    var run = partials[s] + workgroup_scan(t, sum).x;
     for (var k = 0u; k < SCAN_ITEMS; k++) {
         let v = tile[own + k];
         tile[own + k] = run;

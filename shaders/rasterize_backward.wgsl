@@ -20,8 +20,11 @@
 //! struct per pixel this pass took 1.6 times as long in Chromium; docs/PERFORMANCE.md).
 //! Pixels read the list
 //! straight from storage: on lavapipe, staging batches in workgroup memory behind
-//! barriers was no faster. The exposure gradient is reduced over the workgroup
-//! first, then added once. The logits need no per-pixel accumulators: their share of
+//! barriers was no faster. The kernel has no barrier at all: each invocation reads
+//! its tile's range itself and adds its four pixels' exposure gradient itself, since
+//! where a CPU runs workgroups (SwiftShader) a barrier makes every invocation group
+//! a coroutine (a workgroup reduction of the exposure gradient and a uniform load of
+//! the range made this pass 1.25× as long in Chromium; docs/PERFORMANCE.md). The logits need no per-pixel accumulators: their share of
 //! dL/dalpha is Σ_q (l_q − acc_q)·dl_q, and since dl is fixed per pixel the
 //! accumulated Σ_q acc_q·dl_q follows the same recurrence as acc_q, so two scalars
 //! carry it (the oracle keeps one accumulator per channel, which is the same sum).
@@ -54,8 +57,6 @@ const S_OPACITY: u32 = 14u;
 const S_RGB: u32 = 15u;
 const S_LOGITS: u32 = 18u;
 
-var<workgroup> range: vec2<u32>;
-var<workgroup> red: array<vec2<f32>, 16>;
 
 /// A pixel's loss gradients and forward outputs, as the walk starts.
 struct PixelIn {
@@ -160,10 +161,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
     let x = wg.x * TILE + lid.x;
     let y = wg.y * TILE + 4u * lid.y;
     let stride = S_LOGITS + CH;
-    if li == 0u {
-        range = vec2<u32>(ranges[2u * tile], ranges[2u * tile + 1u]);
-    }
-    let r = workgroupUniformLoad(&range);
+    let r = vec2<u32>(ranges[2u * tile], ranges[2u * tile + 1u]);
     let gain = exp(view.exposure_a);
     let pa = load_pixel(x, y, gain);
     let pb = load_pixel(x, y + 1u, gain);
@@ -262,18 +260,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
         add3(g0 + S_N, g.n);
         add3(g0 + S_PC, g.pc + vec3<f32>(0.0, 0.0, dot(w, dd)));
     }
-    // The exposure gradient: one add per workgroup instead of one per pixel.
-    red[li] = dexp;
-    workgroupBarrier();
-    for (var off = 8u; off > 0u; off = off / 2u) {
-        if li < off {
-            red[li] += red[li + off];
-        }
-        workgroupBarrier();
-    }
-    if li == 0u {
-        let e0 = stride * view.count;
-        accum_add(e0, red[0].x);
-        accum_add(e0 + 1u, red[0].y);
-    }
+    // The exposure gradient: one add per invocation (four pixels).
+    let e0 = stride * view.count;
+    accum_add(e0, dexp.x);
+    accum_add(e0 + 1u, dexp.y);
 }

@@ -9,11 +9,13 @@
 //! (sums over surfels, see `RegData::weights` for why not means)
 //! The edge list is symmetric (both directions stored), so each invocation owns its
 //! surfel's gradient and needs no atomics. The LiDAR elevation per surfel comes from a
-//! lookup built once on the host, not a search per step. Each workgroup reduces the
-//! three loss sums and writes one partial triple. An invocation handles `PER` surfels
-//! (256 apart, so that neighbouring invocations read neighbouring words): on lavapipe
-//! each of the reduction's barriers is costly, and with one surfel per invocation the
-//! reduction took 60 % of the pass (131 ms per step at 5 cm, 54 without it). A z gradient that is not `usable`
+//! lookup built once on the host, not a search per step. Each invocation writes its
+//! three loss sums, and `partial_sums` reduces them to a triple per 256 invocations:
+//! no workgroup memory and no barrier, which where a CPU runs workgroups make the
+//! whole kernel dear (on lavapipe a reduction tree here took 60 % of the pass; in
+//! Chromium the kernel took 10× its lavapipe time with it). An invocation handles
+//! `PER` surfels (256 apart, so that neighbouring invocations read neighbouring
+//! words), which keeps the written sums few. A z gradient that is not `usable`
 //! (guard.wgsl) raises `status[0]`, and `adam` then applies nothing.
 //!
 //! Selective: invocation slot j takes candidate `cand[j]` and writes (its z
@@ -39,14 +41,13 @@
 // Dense: z gradient per surfel (f32 bits), then `adam`'s membership words.
 // Selective: (z gradient, surfel) per candidate slot.
 @group(0) @binding(5) var<storage, read_write> zgrad: array<u32>;
+// The invocation's (smoothness, trajectory, LiDAR) terms, summed by `partial_sums`.
 @group(0) @binding(6) var<storage, read_write> partial: array<f32>;
 // [0]: a gradient was not usable; [1]: a surfel in the box was not a candidate.
 @group(0) @binding(7) var<storage, read_write> status: array<u32>;
 @group(0) @binding(8) var<uniform> view: View;
 // The view's candidates, increasing: slot → surfel.
 @group(0) @binding(9) var<storage, read> cand: array<u32>;
-
-var<workgroup> red: array<vec3<f32>, 256>;
 
 // `PER`, the surfels per invocation, is prepended by the host (src/optim/train.rs),
 // which dispatches ceil(count / (256 PER)) workgroups.
@@ -116,17 +117,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             l += surfel(i);
         }
     }
-    red[li] = l;
-    workgroupBarrier();
-    for (var off = 128u; off > 0u; off = off / 2u) {
-        if li < off {
-            red[li] += red[li + off];
-        }
-        workgroupBarrier();
-    }
-    if li == 0u {
-        partial[3u * w] = red[0].x;
-        partial[3u * w + 1u] = red[0].y;
-        partial[3u * w + 2u] = red[0].z;
-    }
+    // No workgroup reduction here: a barrier makes the whole kernel dear where a CPU
+    // runs workgroups (partial_sums.wgsl says why).
+    let at = 3u * (w * 256u + li);
+    partial[at] = l.x;
+    partial[at + 1u] = l.y;
+    partial[at + 2u] = l.z;
 }

@@ -1,57 +1,43 @@
-//! scan: exclusive prefix sum of u32 counts, in three dispatches: (1) each workgroup
-//! scans a block of 256 × PER values: each invocation sums its PER consecutive values
-//! in registers, the workgroup scans the 256 sums in workgroup memory (Hillis–Steele,
-//! 8 steps), and the block total is recorded; (2) one workgroup scans the block
-//! totals, each invocation walking a contiguous run (so any count of blocks works
-//! without recursion); (3) every value gets its block's offset. The grand total lands
-//! in `total[0]`, on the GPU, for the kernels that follow (no read-back).
+//! scan: exclusive prefix sum of u32 counts, in three dispatches: (1) each invocation
+//! scans a block of PER consecutive values serially and records the block's total;
+//! (2) one workgroup scans the block totals, each invocation walking a contiguous
+//! run (so any count of blocks works without recursion; `workgroup_scan`,
+//! workgroup.wgsl, three barriers, prepended by the host); (3) every value gets its
+//! block's offset. The grand total lands in `total[0]`, on the GPU, for the kernels
+//! that follow (no read-back).
 //!
-//! Why PER values per invocation: workgroup barriers are dear where a CPU runs the
-//! workgroup (SwiftShader in Chromium measured ~200 ms for one invocation per value on
-//! 113 k values, 17 barriers per 256 values); PER = 8 divides the barriers by 8.
+//! Why the blocks are one invocation's: where a CPU runs the workgroups (SwiftShader
+//! in Chromium, lavapipe natively), a kernel with any barrier runs every invocation
+//! group as a coroutine. With one invocation per value and Hillis–Steele in each
+//! 256-value block, SwiftShader took ~200 ms on 113 k values; with 8 values per
+//! invocation and a workgroup scan per 2048 values, pass (1) still took 20× its
+//! lavapipe time in Chromium (9.6 ms per step on `demo`). Without a barrier in (1),
+//! only the single workgroup of (2) pays for one.
 
 @group(0) @binding(0) var<storage, read> input: array<u32>;
 @group(0) @binding(1) var<storage, read_write> output: array<u32>;
 @group(0) @binding(2) var<storage, read_write> block_sums: array<u32>;
 @group(0) @binding(3) var<storage, read_write> total: array<u32>;
-// count, blocks, row stride of the block dispatch and of the per-value dispatch (in
-// invocations).
+// count, blocks (count / PER, rounded up), row stride of the block dispatch and of the
+// per-value dispatch (in invocations).
 @group(0) @binding(4) var<uniform> params: vec4<u32>;
 
-const PER: u32 = 8u;
-const BLOCK: u32 = 2048u; // 256 × PER
-
-var<workgroup> tmp: array<u32, 256>;
+// `PER` (values per block) is prepended by the host (src/render/gpu.rs, `SCAN_PER`).
 
 @compute @workgroup_size(256)
-fn scan_blocks(@builtin(local_invocation_index) li: u32, @builtin(workgroup_id) wg: vec3<u32>) {
-    let block = wg.x + wg.y * (params.z / 256u);
-    let base = block * BLOCK + li * PER;
-    // Exclusive sums within this invocation's run.
-    var before: array<u32, 8>;
+fn scan_blocks(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let block = gid.x + gid.y * params.z;
+    if block >= params.y {
+        return;
+    }
+    let base = block * PER;
     var run = 0u;
-    for (var j = 0u; j < PER; j++) {
-        let i = base + j;
-        before[j] = run;
-        run += select(0u, input[min(i, params.x - 1u)], i < params.x);
+    for (var i = base; i < min(base + PER, params.x); i++) {
+        let v = input[i];
+        output[i] = run;
+        run += v;
     }
-    tmp[li] = run;
-    workgroupBarrier();
-    for (var off = 1u; off < 256u; off = off * 2u) {
-        let add = select(0u, tmp[li - off], li >= off);
-        workgroupBarrier();
-        tmp[li] = tmp[li] + add;
-        workgroupBarrier();
-    }
-    let offset = tmp[li] - run;
-    for (var j = 0u; j < PER; j++) {
-        if base + j < params.x {
-            output[base + j] = offset + before[j];
-        }
-    }
-    if li == 255u {
-        block_sums[block] = tmp[255];
-    }
+    block_sums[block] = run;
 }
 
 @compute @workgroup_size(256)
@@ -64,22 +50,15 @@ fn scan_sums(@builtin(local_invocation_index) li: u32) {
     for (var b = start; b < end; b++) {
         run += block_sums[b];
     }
-    tmp[li] = run;
-    workgroupBarrier();
-    for (var off = 1u; off < 256u; off = off * 2u) {
-        let add = select(0u, tmp[li - off], li >= off);
-        workgroupBarrier();
-        tmp[li] = tmp[li] + add;
-        workgroupBarrier();
-    }
-    var acc = tmp[li] - run;
+    let scanned = workgroup_scan(li, run);
+    var acc = scanned.x;
     for (var b = start; b < end; b++) {
         let s = block_sums[b];
         block_sums[b] = acc;
         acc += s;
     }
     if li == 255u {
-        total[0] = tmp[255];
+        total[0] = scanned.y;
     }
 }
 
@@ -87,6 +66,6 @@ fn scan_sums(@builtin(local_invocation_index) li: u32) {
 fn add_offsets(@builtin(global_invocation_id) gid: vec3<u32>) {
     let i = gid.x + gid.y * params.w;
     if i < params.x {
-        output[i] += block_sums[i / BLOCK];
+        output[i] += block_sums[i / PER];
     }
 }

@@ -245,6 +245,8 @@ pub struct Timings {
     pub colour_ms: f64,
     pub gpu_setup_ms: f64,
     pub train_ms: f64,
+    /// Of `train_ms`: reading, decoding and packing the steps' target images.
+    pub target_ms: f64,
     pub bev_ms: f64,
     pub eval_ms: f64,
 }
@@ -524,6 +526,7 @@ impl Session {
         let t = Instant::now();
         let v = self.train_views[self.order[self.steps_done()]];
         let (target, count) = self.target(b, &v)?;
+        self.timings.target_ms += t.elapsed().as_secs_f64() * 1e3;
         let mut cam = view_camera(&b.manifest, v.frame, v.view, self.origin, [0.0, 0.0])
             .ok_or(ReconstructError::NoViews)?;
         // With refinement: the view from the frame's corrected pose, and from the

@@ -92,3 +92,37 @@ fn the_platform_probe_matches_its_oracle() {
         assert!((g - c).abs() <= 1e-4, "value {i}: gpu {g} cpu {c}");
     }
 }
+
+/// `partial_sums` (the loss's and the regularisers' sums) against its oracle: strides
+/// 2 and 3, a count that leaves the last run partial, and the guard raised by a NaN
+/// only when asked for.
+#[test]
+fn partial_sums_match_their_oracle() {
+    use rogs::gpu::partial_sums::{partial_sums_cpu, partial_sums_gpu};
+    let c = ctx();
+    for stride in [2u32, 3] {
+        let n = 256 * 5 + 37;
+        let values: Vec<f32> = (0..n * stride as usize)
+            .map(|i| ((i * 37 % 101) as f32 - 50.0) / 64.0)
+            .collect();
+        let (gpu, word) =
+            pollster::block_on(partial_sums_gpu(&c, &values, stride, true)).expect("gpu");
+        let cpu = partial_sums_cpu(&values, stride as usize);
+        assert_eq!(gpu.len(), cpu.len(), "stride {stride}: 6 runs");
+        assert_eq!(cpu.len(), 6 * stride as usize);
+        for (i, (g, c)) in gpu.iter().zip(&cpu).enumerate() {
+            assert!(
+                (g - c).abs() <= 1e-3,
+                "stride {stride}, sum {i}: gpu {g} cpu {c}"
+            );
+        }
+        assert_eq!(word, 0, "usable sums raise nothing");
+        let mut bad = values.clone();
+        bad[stride as usize * 300 + 1] = f32::NAN;
+        for guard in [true, false] {
+            let (_, word) =
+                pollster::block_on(partial_sums_gpu(&c, &bad, stride, guard)).expect("gpu");
+            assert_eq!(word, guard as u32, "stride {stride}, guard {guard}");
+        }
+    }
+}

@@ -7,10 +7,15 @@
 
 pub mod buffers;
 pub mod contract;
+pub mod partial_sums;
 pub mod radix_sort;
 pub mod readback;
 pub mod scatter_add;
 pub mod timing;
+
+/// `workgroup_scan` (shaders/workgroup.wgsl): a 256-invocation workgroup's prefix
+/// sum in three barriers, prepended to the kernels that scan per workgroup.
+pub const WORKGROUP_WGSL: &str = include_str!("../../shaders/workgroup.wgsl");
 
 use serde::Serialize;
 use thiserror::Error;

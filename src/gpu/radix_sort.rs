@@ -130,7 +130,10 @@ impl RadixSorter {
         let scope = dev.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = ctx.shader(
             "radix_sort",
-            &[include_str!("../../shaders/radix_sort.wgsl")],
+            &[
+                super::WORKGROUP_WGSL,
+                include_str!("../../shaders/radix_sort.wgsl"),
+            ],
         );
         let mut entries: Vec<_> = (0..7u32)
             .map(|b| storage_entry(b, matches!(b, 0 | 1 | 6)))

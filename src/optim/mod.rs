@@ -3,6 +3,7 @@
 //! a seeded shuffled order.
 
 pub mod adam;
+pub mod bench;
 pub mod check;
 pub mod pose;
 pub mod train;

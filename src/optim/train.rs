@@ -26,6 +26,7 @@ use super::TrainConfig;
 use crate::gpu::buffers::{
     bind, bind_ranges, bytes_of, dispatch, init_storage, pipeline, storage, uniform, window,
 };
+use crate::gpu::partial_sums::PartialSums;
 use crate::gpu::readback::read_f32;
 use crate::gpu::{GpuContext, GpuError};
 use crate::loss::regularise::{RegData, RegWeights};
@@ -77,6 +78,9 @@ struct Kernels {
     regularise: wgpu::ComputePipeline,
     adam: wgpu::ComputePipeline,
     exposure: wgpu::ComputePipeline,
+    /// The loss's and the regularisers' terms summed per 256 (`partial_sums`).
+    loss_sums: PartialSums,
+    reg_sums: PartialSums,
     /// `sync_known`: the z the host knows into the moments' blocks.
     sync: wgpu::ComputePipeline,
     pose: PoseGrad,
@@ -322,11 +326,7 @@ impl Trainer {
             loss: pipeline(
                 &ctx,
                 "loss",
-                &[
-                    GUARD_WGSL,
-                    LossParams::WGSL,
-                    include_str!("../../shaders/loss.wgsl"),
-                ],
+                &[LossParams::WGSL, include_str!("../../shaders/loss.wgsl")],
                 "main",
             ),
             regularise: pipeline(
@@ -344,6 +344,8 @@ impl Trainer {
             adam: pipeline(&ctx, "adam", &adam_src, "main"),
             exposure: pipeline(&ctx, "adam_exposure", &adam_src, "step_exposure"),
             sync: pipeline(&ctx, "adam_sync_known", &adam_src, "sync_known"),
+            loss_sums: PartialSums::new(&ctx, "loss_sums", 2, true),
+            reg_sums: PartialSums::new(&ctx, "regularise_sums", 3, false),
             pose: PoseGrad::new(&ctx),
         };
         let n = p.len() as u64;
@@ -551,8 +553,11 @@ impl Trainer {
         let lp = uniform(ctx, "loss_params", bytemuck::bytes_of(&lp));
         let g_px = storage(ctx, "g_px", 4 * 5 * npx as u64);
         let g_logits = storage(ctx, "g_logits", 4 * (ch * npx) as u64);
-        let wgs = (groups.0 * groups.1) as usize;
-        let partial = storage(ctx, "loss_partial", 8 * wgs as u64);
+        // The pixels' terms (every dispatched invocation's slot: the padding stays
+        // zero), then their sums per 256 pixels, which the host reads.
+        let terms = storage(ctx, "loss_terms", 8 * 256 * (groups.0 * groups.1) as u64);
+        let wgs = PartialSums::runs(npx) as usize;
+        let partial = storage(ctx, "loss_partial", 8 * wgs.max(1) as u64);
         let mut enc = ctx.device.create_command_encoder(&Default::default());
         enc.clear_buffer(&self.status, 0, None);
         let bg = bind(
@@ -565,12 +570,15 @@ impl Trainer {
                 (3, target),
                 (4, &g_px),
                 (5, &g_logits),
-                (6, &partial),
+                (6, &terms),
                 (7, &self.status),
                 (8, &f.total),
             ],
         );
         dispatch(&mut enc, &self.k.loss, &bg, groups);
+        self.k
+            .loss_sums
+            .encode(ctx, &mut enc, &terms, npx, &partial, &self.status);
         let step = self.steps_done;
         let n = self.params.count;
         let view_grad = storage(ctx, "view_grad", 4 * view_grad_len(&f) as u64);
@@ -618,6 +626,8 @@ impl Trainer {
         };
         let rp = uniform(ctx, "reg_params", bytemuck::bytes_of(&rp));
         let swgs = (sg.0 * sg.1) as usize;
+        // Each invocation's terms, summed per 256 invocations by `regularise_sums`.
+        let reg_terms = storage(ctx, "regularise_terms", 4 * 3 * 256 * swgs as u64);
         // Read back at the end: the regulariser's partial sums, the two status words,
         // the pair count and the loss's partial sums.
         let tail = 3 * swgs;
@@ -636,13 +646,22 @@ impl Trainer {
                 (3, &self.adj),
                 (4, &self.priors),
                 (5, &self.zreg),
-                (6, &readback),
+                (6, &reg_terms),
                 (7, &self.status),
                 (8, &f.view),
                 (9, &f.cand_buf),
             ],
         );
         dispatch(&mut enc, &self.k.regularise, &bg, sg);
+        // Into the readback's head: the host sums the triples.
+        self.k.reg_sums.encode(
+            ctx,
+            &mut enc,
+            &reg_terms,
+            256 * swgs as u32,
+            &readback,
+            &self.status,
+        );
         let lr = &self.cfg.lr;
         let c = StepConstants::new(
             lr,

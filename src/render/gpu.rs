@@ -41,6 +41,9 @@ pub static VIEW_WGSL: std::sync::LazyLock<String> = std::sync::LazyLock::new(|| 
 const LOAD_SURFEL_WGSL: &str = include_str!("../../shaders/load_surfel.wgsl");
 /// `usable(x)`: the gradient test behind the optimiser's status word.
 pub const GUARD_WGSL: &str = include_str!("../../shaders/guard.wgsl");
+pub use crate::gpu::WORKGROUP_WGSL;
+/// Values per block of shaders/scan.wgsl (`PER` there): one invocation's serial run.
+const SCAN_PER: u32 = 8;
 /// Floats per pixel of the packed forward outputs (`PIX_STRIDE` in view.wgsl).
 const PIX_STRIDE: usize = 10;
 
@@ -207,6 +210,7 @@ impl GpuRasterizer {
         };
         let pipe = |label: &str, parts: &[&str], entry: &str| pipeline(ctx, label, parts, entry);
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let scan_per = format!("const PER: u32 = {SCAN_PER}u;");
         let scan = include_str!("../../shaders/scan.wgsl");
         let me = Self {
             project: pipe(
@@ -214,9 +218,17 @@ impl GpuRasterizer {
                 &[&VIEW_WGSL, include_str!("../../shaders/project.wgsl")],
                 "main",
             ),
-            scan_blocks: pipe("scan_blocks", &[scan], "scan_blocks"),
-            scan_sums: pipe("scan_sums", &[scan], "scan_sums"),
-            add_offsets: pipe("add_offsets", &[scan], "add_offsets"),
+            scan_blocks: pipe(
+                "scan_blocks",
+                &[WORKGROUP_WGSL, &scan_per, scan],
+                "scan_blocks",
+            ),
+            scan_sums: pipe("scan_sums", &[WORKGROUP_WGSL, &scan_per, scan], "scan_sums"),
+            add_offsets: pipe(
+                "add_offsets",
+                &[WORKGROUP_WGSL, &scan_per, scan],
+                "add_offsets",
+            ),
             gather: pipe(
                 "gather",
                 &[&ch, include_str!("../../shaders/gather.wgsl")],
@@ -386,9 +398,9 @@ impl GpuRasterizer {
         let proj = storage(ctx, "proj", 4 * 24 * n as u64);
         let counts = storage(ctx, "tile_count", 4 * n as u64);
         let offsets = storage(ctx, "offsets", 4 * n as u64);
-        // scan.wgsl: one workgroup per block of 2048 values.
-        let (bx, by) = ctx.dispatch_2d(n.div_ceil(2048));
-        let blocks = (bx * by).max(1);
+        // scan.wgsl: one invocation per block of `SCAN_PER` values.
+        let blocks = n.div_ceil(SCAN_PER).max(1);
+        let (bx, by) = ctx.dispatch_2d(blocks.div_ceil(256));
         let block_sums = storage(ctx, "block_sums", 4 * blocks as u64);
         let total = storage(ctx, "total", 16);
         let scan_params = uniform(

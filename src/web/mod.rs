@@ -164,3 +164,33 @@ pub async fn bench_raster(
         .map_err(|e| JsValue::from_str(&e))?;
     Ok(out.to_string())
 }
+
+/// The training-step benchmark (`rogs bench step`) in the browser: `steps` timed
+/// steps of the bundle `bytes` at grid `resolution` (metres), corridor `half_width`
+/// (metres); the figures as JSON text (scripts/bench-ratio.mjs).
+#[wasm_bindgen]
+pub async fn bench_step(
+    bytes: Vec<u8>,
+    steps: usize,
+    resolution: f64,
+    half_width: f64,
+) -> Result<String, JsValue> {
+    use crate::optim::bench::{step, StepBench};
+    let mut b = Bundle::from_zip_bytes(bytes, Limits::default())
+        .map_err(|e| JsValue::from_str(&e.to_string()))?;
+    let ctx = GpuContext::new()
+        .await
+        .map_err(|e| JsValue::from_str(&e.to_string()))?;
+    let o = StepBench {
+        steps,
+        resolution,
+        half_width,
+        moment_window: None,
+        adam: crate::optim::TrainConfig::default().adam,
+    };
+    let now = || js_sys::Date::now() / 1e3;
+    let out = step(&mut b, "bundle", &o, ctx, &now)
+        .await
+        .map_err(|e| JsValue::from_str(&e))?;
+    Ok(out.to_string())
+}

@@ -2,6 +2,8 @@
 //! (bad input; 2 is a usage error, 4 a machine that could not do it).
 #![cfg(not(target_arch = "wasm32"))]
 
+mod common;
+
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -111,12 +113,25 @@ fn a_drive_too_long_for_whole_layers_streams_and_over_its_budget_is_bad_input() 
     let o = run(&args(&[]));
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(0), "{err}");
-    assert!(err.contains("tile by tile into map.rogsmap"), "{err}");
+    assert!(err.contains("written block by block: map.rogsmap"), "{err}");
     let map = std::fs::read(out.join("map.rogsmap")).expect("map.rogsmap");
     let summary = rogs::export::map_file::validate(map, &rogs::bundle::Limits::default())
         .unwrap_or_else(|e| panic!("the streamed map is invalid: {e}"));
     eprintln!("{summary:?}");
+    // Over 2^28 px: no dense layers, the tiled GeoTIFFs as GDAL reads them.
     assert!(!out.join("rgb.png").exists());
+    let info: serde_json::Value =
+        serde_json::from_slice(&common::tool(&out, "gdalinfo", &["-json", "elevation.tif"]))
+            .expect("gdalinfo json");
+    let bev: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("bev.json")).expect("bev.json"))
+            .expect("json");
+    assert_eq!(
+        info["size"],
+        serde_json::json!([bev["width"], bev["height"]]),
+        "{info}"
+    );
+    assert!(out.join("rgb.tif").exists() && out.join("elevation_legend.png").exists());
     let report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("report.json")).expect("report"))
             .expect("json");

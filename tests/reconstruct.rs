@@ -3,6 +3,8 @@
 //! caster), and a NaN that stops optimisation and keeps the last good model.
 #![cfg(not(target_arch = "wasm32"))]
 
+mod common;
+
 use rogs::bundle::{Bundle, Limits};
 use rogs::gpu::GpuContext;
 use rogs::optim::train::{TrainError, Trainer};
@@ -327,19 +329,7 @@ fn geotiffs_read_by_gdal(files: &[(String, Vec<u8>)], g: &rogs::bev::BevGeometry
     for n in ["elevation.tif", "rgb.tif", "semantic.tif"] {
         std::fs::write(dir.join(n), get(n)).expect("write");
     }
-    let run = |cmd: &str, args: &[&str]| -> Vec<u8> {
-        let out = std::process::Command::new(cmd)
-            .args(args)
-            .current_dir(&dir)
-            .output()
-            .unwrap_or_else(|e| panic!("{cmd} (gdal-bin, installed by scripts/setup.sh): {e}"));
-        assert!(
-            out.status.success(),
-            "{cmd} {args:?}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        out.stdout
-    };
+    let run = |cmd: &str, args: &[&str]| common::tool(&dir, cmd, args);
     let info = |n: &str| -> serde_json::Value {
         serde_json::from_slice(&run("gdalinfo", &["-json", n])).expect("gdalinfo json")
     };
@@ -367,11 +357,7 @@ fn geotiffs_read_by_gdal(files: &[(String, Vec<u8>)], g: &rogs::bev::BevGeometry
     assert_eq!(sem["bands"][0]["type"], "Byte");
     assert_eq!(sem["bands"][0]["noDataValue"], 255.0);
     // Values: GDAL's raw copy of each against the map's own files.
-    run(
-        "gdal_translate",
-        &["-q", "-of", "ENVI", "elevation.tif", "elevation.bin"],
-    );
-    let z = std::fs::read(dir.join("elevation.bin")).expect("elevation.bin");
+    let z = common::gdal_pixels(&dir, "elevation.tif");
     let want: Vec<u8> = get("elevation.f32")
         .chunks_exact(4)
         .flat_map(|b| (f32::from_le_bytes([b[0], b[1], b[2], b[3]]) + off[2] as f32).to_le_bytes())
@@ -380,11 +366,7 @@ fn geotiffs_read_by_gdal(files: &[(String, Vec<u8>)], g: &rogs::bev::BevGeometry
         z, want,
         "elevation.tif differs from elevation.f32 + the frame's z offset"
     );
-    run(
-        "gdal_translate",
-        &["-q", "-of", "ENVI", "semantic.tif", "semantic.bin"],
-    );
-    let ids = std::fs::read(dir.join("semantic.bin")).expect("semantic.bin");
+    let ids = common::gdal_pixels(&dir, "semantic.tif");
     let png = image::load_from_memory(get("semantic_ids.png"))
         .expect("png")
         .to_luma8();

@@ -446,6 +446,54 @@ fn a_map_too_large_for_memory_is_refused_with_advice_before_it_is_allocated() {
     );
 }
 
+/// Every raster file written block by block (`streamed`) shows what the whole map's
+/// file of the same name shows: PNGs decoded pixel for pixel, the elevation arrays
+/// byte for byte, the tiled GeoTIFFs as GDAL reads them.
+fn same_raster_files(streamed: &[(String, std::io::Cursor<Vec<u8>>)], whole: &[(String, Vec<u8>)]) {
+    let dir = std::env::temp_dir().join(format!("rogs-layers-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let names: Vec<&str> = streamed.iter().map(|f| f.0.as_str()).collect();
+    for n in [
+        "rgb.png",
+        "semantic.png",
+        "elevation.png",
+        "error.png",
+        "elevation.f32",
+        "elevation.tif",
+        "rgb.tif",
+        "semantic.tif",
+    ] {
+        assert!(names.contains(&n), "{n} is not among {names:?}");
+    }
+    for (name, c) in streamed {
+        let a = c.get_ref();
+        let b = &whole
+            .iter()
+            .find(|f| &f.0 == name)
+            .unwrap_or_else(|| panic!("{name} is not among the whole map's files"))
+            .1;
+        if name.ends_with(".png") {
+            let (x, y) = (
+                image::load_from_memory(a).expect("png"),
+                image::load_from_memory(b).expect("png"),
+            );
+            assert_eq!((x.width(), x.height()), (y.width(), y.height()), "{name}");
+            assert!(x.as_bytes() == y.as_bytes(), "{name}: pixels differ");
+        } else if name.ends_with(".tif") {
+            std::fs::write(dir.join(format!("s-{name}")), a).expect("write");
+            std::fs::write(dir.join(format!("w-{name}")), b).expect("write");
+            let (x, y) = (
+                common::gdal_pixels(&dir, &format!("s-{name}")),
+                common::gdal_pixels(&dir, &format!("w-{name}")),
+            );
+            assert!(!x.is_empty() && x == y, "{name}: GDAL reads other pixels");
+        } else {
+            assert!(a == b, "{name}: bytes differ");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn a_map_too_large_for_whole_layers_streams_block_by_block_into_the_same_map_file() {
     // The IPM baseline (no training) of `demo` at the truth's 2 cm in 12 m tiles:
@@ -485,8 +533,20 @@ fn a_map_too_large_for_whole_layers_streams_block_by_block_into_the_same_map_fil
         "{}",
         s.report["map_layers"]
     );
+    // Its raster files, block by block.
+    let names = rogs::export::layers::names(&r.geometry, &b.manifest, true);
+    let mut sinks: Vec<_> = names
+        .iter()
+        .map(|n| (n.to_string(), std::io::Cursor::new(Vec::new())))
+        .collect();
+    let mut blocks = 0;
+    r.write_layers(&b, s.range, &mut sinks, &mut |_, t| blocks = t)
+        .expect("layers");
+    assert!(blocks >= 24, "{blocks} blocks");
     // The same run finished whole (the budget only decides which way the CLI goes).
     let o = pollster::block_on(r.finish(&b, &mut |_, _| {})).expect("finish");
+    let whole = rogs::export::files(&o, &b.manifest).expect("files");
+    same_raster_files(&sinks, &whole);
     let dense = rogs::export::map_file::write(&o, &b, b"{}").expect("map");
     let (a, d) = (common::zip_entries(&s.map), common::zip_entries(&dense));
     let tiles = |e: &[(String, Vec<u8>)]| -> Vec<(String, Vec<u8>)> {

@@ -510,12 +510,18 @@ fn write_streamed(
     let model = write_model(out, run, b, ply_up)?;
     let g = run.geometry;
     let channels = run.model().0.channels();
+    let dense = crate::export::layers::dense(&g);
     eprintln!(
         "the map is {}×{} px: its whole layers would take {} MiB, over the budget (--map-memory-mib), \
-         so every layer is written tile by tile into map.rogsmap (no whole-image PNG or GeoTIFF layers)",
+         so every layer is written block by block: map.rogsmap, the tiled GeoTIFFs{}",
         g.width,
         g.height,
-        crate::tiles::Stitcher::bytes(&g, channels) >> 20
+        crate::tiles::Stitcher::bytes(&g, channels) >> 20,
+        if dense {
+            ", and the PNG layers and elevation arrays a row of blocks at a time"
+        } else {
+            " (no PNG layers or elevation arrays: the map has over 2^28 pixels)"
+        }
     );
     let mut bar = Progress::new("map");
     let done = pollster::block_on(run.finish_streamed(b, name, &mut |d, t| bar.update(d, t)));
@@ -526,18 +532,25 @@ fn write_streamed(
             out.join("surfels.ply").display()
         )
     })?;
-    let geo = serde_json::json!({
-        "origin": g.origin, "resolution": g.resolution, "width": g.width, "height": g.height,
-        "note": "origin is the world x of the west edge and y of the north edge; row 0 is north; \
-                 the layers are in map.rogsmap (docs/MAP.md)",
-        "world_frame": b.manifest.world_frame, "frame": b.manifest.frame_description(),
-    });
+    // The raster layers straight into their files.
+    let names = crate::export::layers::names(&g, &b.manifest, run.has_truth());
+    let mut sinks = Vec::new();
+    for n in &names {
+        let p = out.join(n);
+        let f =
+            std::fs::File::create(&p).map_err(|e| format!("cannot create {}: {e}", p.display()))?;
+        sinks.push((n.to_string(), std::io::BufWriter::new(f)));
+    }
+    let mut bar = Progress::new("layers");
+    run.write_layers(b, done.range, &mut sinks, &mut |d, t| bar.update(d, t))?;
+    bar.finish();
+    for (n, mut w) in sinks {
+        std::io::Write::flush(&mut w).map_err(|e| format!("{}: {e}", out.join(n).display()))?;
+    }
     let json = |v: &serde_json::Value| serde_json::to_vec_pretty(v).map_err(|e| e.to_string());
-    let mut files = vec![
-        ("report.json".to_string(), json(&done.report)?),
-        ("bev.json".to_string(), json(&geo)?),
-        ("map.rogsmap".to_string(), done.map),
-    ];
+    let mut files = crate::export::side_files(&g, &b.manifest, done.range, run.has_truth());
+    files.push(("report.json".to_string(), json(&done.report)?));
+    files.push(("map.rogsmap".to_string(), done.map));
     if let Some(p) = run.pose_refiner() {
         files.push(("poses_refined.json".into(), json(&p.file(&b.manifest))?));
     }
@@ -545,7 +558,11 @@ fn write_streamed(
     if let Some(m) = &done.outcome.metrics {
         eprintln!("metrics: {}", serde_json::to_string(m).unwrap_or_default());
     }
-    eprintln!("wrote {} files to {}", model + files.len(), out.display());
+    eprintln!(
+        "wrote {} files to {}",
+        model + names.len() + files.len(),
+        out.display()
+    );
     Ok(())
 }
 

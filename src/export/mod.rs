@@ -3,6 +3,7 @@
 
 pub mod colour;
 pub mod geotiff;
+pub mod layers;
 pub mod map_file;
 pub mod ply;
 
@@ -10,7 +11,7 @@ use crate::bev::BevGeometry;
 use crate::bundle::Manifest;
 use crate::reconstruct::Outcome;
 use crate::render::Params;
-use colour::{legend, mapped};
+use colour::legend;
 use image::{GrayImage, RgbImage};
 
 fn png(img: &image::DynamicImage) -> Vec<u8> {
@@ -20,8 +21,9 @@ fn png(img: &image::DynamicImage) -> Vec<u8> {
     out.into_inner()
 }
 
-/// A float32 array as NumPy `.npy` (version 1.0, little endian, C order).
-pub fn npy(v: &[f32], width: u32, height: u32) -> Vec<u8> {
+/// The header of a float32 array of `height` rows of `width` as NumPy `.npy`
+/// (version 1.0, little endian, C order); the values follow.
+pub fn npy_header(width: u32, height: u32) -> Vec<u8> {
     let mut head =
         format!("{{'descr': '<f4', 'fortran_order': False, 'shape': ({height}, {width}), }}");
     // Magic (6) + version (2) + length (2) + header, padded with spaces to 64 bytes.
@@ -32,9 +34,6 @@ pub fn npy(v: &[f32], width: u32, height: u32) -> Vec<u8> {
     let mut out = b"\x93NUMPY\x01\x00".to_vec();
     out.extend_from_slice(&(head.len() as u16).to_le_bytes());
     out.extend_from_slice(head.as_bytes());
-    for x in v {
-        out.extend_from_slice(&x.to_le_bytes());
-    }
     out
 }
 
@@ -239,103 +238,67 @@ fn class_colours(p: &Params<f32>, m: &Manifest) -> Vec<[u8; 3]> {
 /// The map's files (BEV layers and their geometry); with `model_files` and the report,
 /// every output of a run.
 pub fn files(o: &Outcome, m: &Manifest) -> Result<Vec<(String, Vec<u8>)>, String> {
-    let g: &BevGeometry = &o.geometry;
-    let (w, h) = (g.width, g.height);
-    let r = &o.raster;
-    let mut out = vec![
-        ("rgb.png".into(), png(&r.rgb.clone().into())),
-        ("valid.png".into(), png(&r.valid.clone().into())),
-    ];
-    // A drive without labels has no semantic layer.
-    if m.labelled() {
-        out.push((
-            "semantic.png".into(),
-            png(&semantic_colours(m, &r.class_ids, &r.valid).into()),
-        ));
-        out.push(("semantic_ids.png".into(), png(&r.class_ids.clone().into())));
-    }
-    let z = elevation(o);
-    let (lo, hi) = range(&z);
-    out.push((
-        "elevation.png".into(),
-        png(&mapped(&z, w, h, lo, hi).into()),
-    ));
-    out.push((
-        "elevation_legend.png".into(),
-        png(&legend(LEGEND_WIDTH, lo, hi, &|v| format!("{v:.2}m")).into()),
-    ));
-    out.push(("elevation.npy".into(), npy(&z, w, h)));
-    out.push((
-        "elevation.f32".into(),
-        z.iter().flat_map(|v| v.to_le_bytes()).collect(),
-    ));
+    let g = o.geometry;
+    let range = range(&elevation(o));
+    let truth = o.truth.is_some();
+    let mut sinks: Vec<(String, std::io::Cursor<Vec<u8>>)> = layers::names(&g, m, truth)
+        .into_iter()
+        .map(|n| (n.to_string(), std::io::Cursor::new(Vec::new())))
+        .collect();
+    let mut w = layers::LayerFiles::start(&mut sinks, g, m, range, truth)?;
+    w.add(0, 0, o)?;
+    w.finish()?;
+    let mut out: Vec<_> = sinks
+        .into_iter()
+        .map(|(n, c)| (n, c.into_inner()))
+        .collect();
+    out.extend(side_files(&g, m, range, truth));
+    Ok(out)
+}
+
+/// The map's small files beside its layers: `bev.json` (the geometry, and what the
+/// layers hold) and the legends of the colour-mapped layers.
+pub fn side_files(
+    g: &BevGeometry,
+    m: &Manifest,
+    (lo, hi): (f32, f32),
+    truth: bool,
+) -> Vec<(String, Vec<u8>)> {
+    let note = if layers::dense(g) {
+        "origin is the world x of the west edge and y of the north edge; row 0 is north; \
+         elevation.npy/.f32 hold world z in metres, NaN where the map is empty"
+    } else {
+        "origin is the world x of the west edge and y of the north edge; row 0 is north; \
+         the map is too large for whole-image layers: they are in the tiled GeoTIFFs \
+         (elevation.tif holds z in the dataset's frame) and map.rogsmap (docs/MAP.md)"
+    };
     let geo = serde_json::json!({
-        "origin": g.origin, "resolution": g.resolution, "width": w, "height": h,
-        "note": "origin is the world x of the west edge and y of the north edge; row 0 is north; \
-                 elevation.npy/.f32 hold world z in metres, NaN where the map is empty",
+        "origin": g.origin, "resolution": g.resolution, "width": g.width, "height": g.height,
+        "note": note,
         "elevation_min_m": lo, "elevation_max_m": hi,
         "world_frame": m.world_frame, "frame": m.frame_description(),
     });
-    out.push((
-        "bev.json".into(),
-        serde_json::to_vec_pretty(&geo).unwrap_or_default(),
-    ));
-    out.push((
-        "confidence.png".into(),
-        png(&grey(&o.confidence, w, h).into()),
-    ));
-    out.push(("density.png".into(), png(&grey(&o.density, w, h).into())));
-    if let Some(e) = elevation_error(o) {
-        out.push(("error.png".into(), png(&mapped(&e, w, h, 0.0, 0.1).into())));
+    let mut out = vec![
+        (
+            "bev.json".into(),
+            serde_json::to_vec_pretty(&geo).unwrap_or_default(),
+        ),
+        (
+            "elevation_legend.png".into(),
+            png(&legend(LEGEND_WIDTH, lo, hi, &|v| format!("{v:.2}m")).into()),
+        ),
+    ];
+    if truth {
         out.push((
             "error_legend.png".into(),
             png(&legend(LEGEND_WIDTH, 0.0, 0.1, &|v| format!("{:.0}cm", v * 100.0)).into()),
         ));
     }
-    out.extend(geotiffs(o, m, &z)?);
-    Ok(out)
+    out
 }
 
 /// Width of the legend images, pixels.
 const LEGEND_WIDTH: u32 = 400;
-
-/// `elevation.tif`, `rgb.tif` and `semantic.tif` (docs/OUTPUTS.md).
-fn geotiffs(o: &Outcome, m: &Manifest, z: &[f32]) -> Result<Vec<(String, Vec<u8>)>, String> {
-    // The tie point in the dataset's frame, so that the GeoTIFFs line up with its maps.
-    let off = m.frame_offset();
-    let g = &BevGeometry {
-        origin: [o.geometry.origin[0] + off[0], o.geometry.origin[1] + off[1]],
-        ..o.geometry
-    };
-    let frame = &m.frame_description();
-    let r = &o.raster;
-    let ids: Vec<u8> = r
-        .class_ids
-        .as_raw()
-        .iter()
-        .zip(r.valid.as_raw())
-        .map(|(&c, &v)| if v != 0 { c } else { geotiff::SEMANTIC_NODATA })
-        .collect();
-    let rgba = layer_rgba(o, m, "rgb").unwrap_or_default();
-    let z: Vec<f32> = z.iter().map(|v| v + off[2] as f32).collect();
-    let mut out = vec![
-        (
-            "elevation.tif".into(),
-            geotiff::float_tif("elevation.tif", &z, g, frame)?,
-        ),
-        (
-            "rgb.tif".into(),
-            geotiff::rgba_tif("rgb.tif", &rgba, g, frame)?,
-        ),
-    ];
-    if m.labelled() {
-        out.push((
-            "semantic.tif".into(),
-            geotiff::ids_tif("semantic.tif", &ids, g, frame)?,
-        ));
-    }
-    Ok(out)
-}
 
 /// Values through the colour ramp from `lo` to `hi`, as RGBA (transparent where NaN).
 pub fn ramp_rgba(v: &[f32], lo: f32, hi: f32) -> Vec<u8> {

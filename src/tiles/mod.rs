@@ -611,6 +611,11 @@ impl TiledRun {
         self.planned_steps.max(self.steps_done)
     }
 
+    /// Whether the map is scored against a truth (it then has an error layer).
+    pub fn has_truth(&self) -> bool {
+        self.truth.is_some()
+    }
+
     pub fn steps_done(&self) -> usize {
         self.steps_done
     }

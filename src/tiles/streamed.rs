@@ -5,14 +5,16 @@
 //! add up to the whole map's. Nothing the size of the map's bounding box is ever
 //! allocated; the blend holds the blocks the drive covers.
 
-use super::stitch::{Stitcher, BLOCK};
+use super::stitch::{Stitcher, Window, BLOCK};
 use super::{SeamSums, TiledRun};
 use crate::bev::BevImage;
 use crate::bundle::{Bundle, Manifest};
 use crate::eval::{elevation_vs_raster, BevRaster, Tally};
+use crate::export::layers::LayerFiles;
 use crate::export::map_file::{self, MapIndex, MapSource, Region};
 use crate::reconstruct::{road_channels, Outcome, ReconstructError};
 use crate::render::Params;
+use std::io::{Seek, Write};
 use web_time::Instant;
 
 /// A streamed map: the map file and the report it holds.
@@ -20,6 +22,8 @@ pub struct StreamedMap {
     pub map: Vec<u8>,
     pub report: serde_json::Value,
     pub outcome: Outcome,
+    /// The elevation's range over the whole map (the elevation layer's colours).
+    pub range: (f32, f32),
 }
 
 /// The blend's blocks as a map source: block (bx, by) is level-0 tile (bx, by).
@@ -35,14 +39,14 @@ struct BlockSource<'a> {
 
 impl BlockSource<'_> {
     fn outcome(&self, bx: u32, by: u32) -> Option<Outcome> {
+        self.window(bx, by).map(|w| w.1)
+    }
+
+    /// Block (bx, by)'s window and outcome.
+    fn window(&self, bx: u32, by: u32) -> Option<(Window, Outcome)> {
         let (w, layers) = self.stitch.block(bx, by)?;
-        Some(Outcome::block(
-            w.geometry,
-            layers,
-            self.truth,
-            self.road,
-            self.min_alpha,
-        ))
+        let o = Outcome::block(w.geometry, layers, self.truth, self.road, self.min_alpha);
+        Some((w, o))
     }
 }
 
@@ -162,6 +166,42 @@ impl TiledRun {
             map,
             report,
             outcome,
+            range,
         })
+    }
+
+    /// The map's raster files (`export::layers::names`, in that order in `sinks`)
+    /// of a streamed map, block by block, after `finish_streamed` (whose `range`
+    /// it takes); `progress(done, total)` counts blocks.
+    pub fn write_layers<W: Write + Seek>(
+        &self,
+        b: &Bundle,
+        range: (f32, f32),
+        sinks: &mut [(String, W)],
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<(), String> {
+        let road = road_channels(b);
+        let m = &b.manifest;
+        let index = map_file::run_index(m, &self.geometry, false, (0.0, 1.0));
+        let src = BlockSource {
+            stitch: &self.stitch,
+            truth: self.truth.as_ref(),
+            road: &road,
+            min_alpha: self.cfg.train.loss.min_alpha,
+            manifest: m,
+            index: &index,
+            range,
+        };
+        let mut files = LayerFiles::start(sinks, self.geometry, m, range, self.truth.is_some())?;
+        let blocks = self.stitch.blocks();
+        for (k, &(bx, by)) in blocks.iter().enumerate() {
+            progress(k, blocks.len());
+            if let Some((w, o)) = src.window(bx, by) {
+                files.add(w.col, w.row, &o)?;
+            }
+        }
+        files.finish()?;
+        progress(blocks.len(), blocks.len());
+        Ok(())
     }
 }

@@ -214,10 +214,44 @@ pub struct ReconstructConfig {
 pub struct MapConfig {
     /// Host bytes the map's whole layers may take; `None`: 4 × the grid's budget.
     pub budget_bytes: Option<u64>,
-    /// A tiled map whose whole layers would exceed the budget is written block by
-    /// block into map.rogsmap (`TiledRun::finish_streamed`) instead of being refused;
-    /// set where the caller writes files (the CLI), not in the page.
+    /// A tiled map whose whole layers would exceed the budget, or
+    /// `tiles::STREAM_OVER_BYTES`, is written block by block (map.rogsmap,
+    /// `TiledRun::finish_streamed`, and its raster files, `TiledRun::write_layers`)
+    /// instead of being refused or held whole; set where the caller writes files
+    /// (the CLI), not in the page.
     pub stream: bool,
+    /// Where `stream` is set, when a tiled map is finished block by block.
+    pub finish: MapFinish,
+}
+
+/// When a tiled map whose files are written is finished block by block
+/// (`MapConfig::finish`, `Settings::map_finish`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum MapFinish {
+    /// When its whole layers would exceed `tiles::STREAM_OVER_BYTES` or the budget.
+    #[default]
+    Auto,
+    /// Always: the finish holds a row of blocks, whatever the map's size.
+    Blocks,
+    /// Only over the budget: the whole layers are held (the seam statistics then
+    /// count pairs across blocks too).
+    Whole,
+}
+
+impl MapFinish {
+    pub fn name(self) -> &'static str {
+        match self {
+            MapFinish::Auto => "auto",
+            MapFinish::Blocks => "blocks",
+            MapFinish::Whole => "whole",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Self> {
+        [MapFinish::Auto, MapFinish::Blocks, MapFinish::Whole]
+            .into_iter()
+            .find(|m| m.name() == s)
+    }
 }
 
 impl Default for ReconstructConfig {

@@ -92,6 +92,11 @@ pub struct Settings {
     /// Host memory the map's whole layers may take, MiB (default: 8 GiB).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub map_memory_mib: Option<u64>,
+    /// Where files are written, when a tiled map is finished block by block:
+    /// "auto" (default: over 1 GiB of whole layers or the budget), "blocks"
+    /// (always) or "whole" (only over the budget).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub map_finish: Option<String>,
     /// "dense" (default: a step updates every surfel) or "selective" (only the
     /// surfels its view may see).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -250,6 +255,11 @@ impl Settings {
         }
         c.map.budget_bytes =
             positive("map_memory_mib", self.map_memory_mib, "8192")?.map(|m| m << 20);
+        if let Some(f) = self.map_finish.as_deref() {
+            c.map.finish = crate::reconstruct::MapFinish::parse(f).ok_or_else(|| {
+                format!("map_finish {f:?}: expected \"auto\", \"blocks\" or \"whole\"")
+            })?;
+        }
         Ok(c)
     }
 

@@ -207,11 +207,28 @@ pub struct SettingsArgs {
     #[arg(long, requires = "refine_poses")]
     pose_rig: bool,
     /// Host memory the map's whole layers may take, MiB (default 8192). A tiled map
-    /// whose whole layers would need more is written tile by tile into map.rogsmap
-    /// (every layer, at every zoom; no whole-image PNG or GeoTIFF layers), holding
-    /// only the blocks of the map the drive covers.
+    /// whose whole layers would need more is finished block by block (see
+    /// --finish), holding only the blocks of the map the drive covers.
     #[arg(long)]
     map_memory_mib: Option<u64>,
+    /// How a tiled map is finished: block by block (map.rogsmap, the tiled
+    /// GeoTIFFs a block at a time, the PNG layers and elevation arrays a row of
+    /// 256-px blocks at a time: the same files, holding a row of blocks) or with its
+    /// whole layers held.
+    #[arg(long, value_enum, default_value = "auto")]
+    finish: Finish,
+}
+
+/// How a tiled map is finished (`Settings::map_finish`).
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+enum Finish {
+    /// Block by block when the whole layers would take over 1 GiB or
+    /// --map-memory-mib.
+    Auto,
+    /// Always block by block.
+    Blocks,
+    /// Whole layers, unless over --map-memory-mib.
+    Whole,
 }
 
 impl SettingsArgs {
@@ -254,6 +271,11 @@ impl SettingsArgs {
                 .then_some(true)
                 .or(a.pose_all.then_some(false)),
             map_memory_mib: a.map_memory_mib,
+            map_finish: match a.finish {
+                Finish::Auto => None,
+                Finish::Blocks => Some("blocks".into()),
+                Finish::Whole => Some("whole".into()),
+            },
             pose_rig: Some(a.pose_rig),
             adam: Some(a.adam.name().into()),
             robust_c: a.robust_c,

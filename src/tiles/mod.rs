@@ -47,8 +47,8 @@ use crate::init::align::AlignSummary;
 use crate::init::PosePlanes;
 use crate::optim::train::StepLoss;
 use crate::reconstruct::{
-    align_from, frame_xy, report, HoldoutSums, Outcome, ReconstructConfig, ReconstructError,
-    Session, UNSEEN_OPACITY_LOGIT,
+    align_from, frame_xy, report, HoldoutSums, MapFinish, Outcome, ReconstructConfig,
+    ReconstructError, Session, UNSEEN_OPACITY_LOGIT,
 };
 use crate::render::from_bundle::view_camera;
 use crate::render::Params;
@@ -433,6 +433,12 @@ pub struct TiledRun {
 /// The map's layers may take this many times the surfel grid's memory budget.
 pub const MAP_BUDGET_PER_GRID_BUDGET: u64 = 4;
 
+/// Where files are written (`MapConfig::stream`), a tiled map whose whole layers
+/// would take more than this is finished block by block even under the budget
+/// (`MapFinish::Auto`), so that the finish of a long drive holds a row of blocks,
+/// not the map (1 GiB).
+pub const STREAM_OVER_BYTES: u64 = 1 << 30;
+
 impl TiledRun {
     /// Aligns the poses (once, for every tile), plans the tiles and prepares the
     /// first one.
@@ -566,7 +572,13 @@ impl TiledRun {
             .map
             .budget_bytes
             .unwrap_or(MAP_BUDGET_PER_GRID_BUDGET * run.cfg.prepare.grid.memory_budget);
-        if bytes > budget {
+        let can_stream = run.cfg.map.stream && run.tiling.is_some();
+        let stream_over = match run.cfg.map.finish {
+            MapFinish::Auto => STREAM_OVER_BYTES,
+            MapFinish::Blocks => 0,
+            MapFinish::Whole => u64::MAX,
+        };
+        if bytes > budget || (can_stream && bytes > stream_over) {
             let probe = Stitcher::new(g, channels, min_alpha);
             let windows: Vec<Window> = run
                 .tiles
@@ -574,17 +586,18 @@ impl TiledRun {
                 .filter_map(|t| probe.window(&t.rect))
                 .collect();
             let held = Stitcher::block_bytes(&g, channels, windows.iter());
-            if !(run.cfg.map.stream && run.tiling.is_some() && held <= budget) {
+            if can_stream && held <= budget {
+                run.streamed = true;
+            } else if bytes > budget {
                 return Err(ReconstructError::MapTooLarge {
                     width: g.width,
                     height: g.height,
                     bytes,
                     budget,
                     resolution: g.resolution,
-                    blocks: (run.cfg.map.stream && run.tiling.is_some()).then_some(held),
+                    blocks: can_stream.then_some(held),
                 });
             }
-            run.streamed = true;
         }
         run.stitch = Stitcher::new(run.geometry, channels, min_alpha);
         run.done = vec![false; run.tiles.len()];

@@ -44,7 +44,16 @@ try {
   const steps = Number(await page.getAttribute('body', 'data-steps'));
   const text = await page.textContent('#progress-text');
   const perStep = Number((text.match(/([\d.]+) s per step/) || [])[1]);
-  console.log(JSON.stringify({ bundle, segment, resolution: Number(resolution), steps, seconds_per_step: perStep, total_s: total, status: await page.textContent('#status'), metrics: await page.textContent('#metrics') }, null, 2));
+  // Seconds from the click: the run started, trained, the map rendered, shown, and
+  // its downloads made.
+  const stages = await page.evaluate(() => Object.fromEntries(['startS', 'trainedS', 'finishS', 'mapShownS', 'exportsS']
+    .map((k) => [k.replace(/S$/, '_s'), Number(document.body.dataset[k])])));
+  // The engine's own stage timings (report.json's).
+  const timings = await page.evaluate(async () => {
+    const a = [...document.querySelectorAll('#exports a')].find((x) => x.download === 'report.json');
+    return a ? (await (await fetch(a.href)).json()).timings : null;
+  });
+  console.log(JSON.stringify({ bundle, segment, resolution: Number(resolution), steps, seconds_per_step: perStep, total_s: total, click_to: stages, timings, status: await page.textContent('#status'), metrics: await page.textContent('#metrics') }, null, 2));
 } finally {
   await close();
 }

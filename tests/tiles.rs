@@ -523,7 +523,13 @@ fn a_map_too_large_for_whole_layers_streams_block_by_block_into_the_same_map_fil
     let mut r = pollster::block_on(TiledRun::new(&mut b, cfg, Some(t), ctx())).expect("run");
     assert!(r.streamed, "a tiled map over the budget streams");
     while pollster::block_on(r.step(&b)).expect("step").is_some() {}
-    let s = pollster::block_on(r.finish_streamed(&b, "demo", &mut |_, _| {})).expect("streamed");
+    let s = pollster::block_on(r.finish_streamed(
+        &b,
+        "demo",
+        std::io::Cursor::new(Vec::new()),
+        &mut |_, _| {},
+    ))
+    .expect("streamed");
     let held = s.report["map_layers"]["held_bytes"].as_u64().unwrap_or(0);
     let whole = s.report["map_layers"]["whole_layers_bytes"]
         .as_u64()
@@ -548,7 +554,10 @@ fn a_map_too_large_for_whole_layers_streams_block_by_block_into_the_same_map_fil
     let whole = rogs::export::files(&o, &b.manifest).expect("files");
     same_raster_files(&sinks, &whole);
     let dense = rogs::export::map_file::write(&o, &b, b"{}").expect("map");
-    let (a, d) = (common::zip_entries(&s.map), common::zip_entries(&dense));
+    let (a, d) = (
+        common::zip_entries(s.map.get_ref()),
+        common::zip_entries(&dense),
+    );
     let tiles = |e: &[(String, Vec<u8>)]| -> Vec<(String, Vec<u8>)> {
         let mut t: Vec<_> = e
             .iter()

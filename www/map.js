@@ -104,6 +104,10 @@ function drawLoss(losses) {
 }
 
 async function optimise(setStatus) {
+  // Seconds from the click to each stage, on the page's body for benchmarks.
+  const tClick = performance.now();
+  const mark = (k) => { document.body.dataset[k] = ((performance.now() - tClick) / 1000).toFixed(2); };
+  for (const k of ['startS', 'trainedS', 'finishS', 'mapShownS', 'exportsS']) delete document.body.dataset[k];
   $('run').disabled = true;
   $('pause').disabled = false;
   $('stop').disabled = false;
@@ -134,6 +138,7 @@ async function optimise(setStatus) {
     view.rec = null;
     previous.free();
   }
+  mark('startS');
   let total = rec.total_steps();
   const losses = [];
   const t0 = performance.now();
@@ -198,12 +203,14 @@ async function optimise(setStatus) {
     await new Promise((r) => setTimeout(r, 0));
   }
   drawLoss(losses);
+  mark('trainedS');
   $('pause').disabled = true;
   $('stop').disabled = true;
   setStatus(error ? `Optimisation stopped: ${error}` : 'Rendering the map layers…', error ? 'error' : 'info');
   try {
     const report = JSON.parse(await rec.finish());
-    showMap(rec, report);
+    mark('finishS');
+    await showMap(rec, report, mark);
     if (!error) setStatus(`Map ready: ${rec.steps_done()} steps in ${fmtTime((performance.now() - t0) / 1000)}.`, 'ok');
   } catch (e) {
     const kept = listExports(rec).childElementCount > 0;
@@ -320,7 +327,7 @@ function showLegend(report, rec) {
     sem.append(s, ` ${c.name} `);
   }
   let geo = {};
-  try { geo = JSON.parse(new TextDecoder().decode(rec.file('bev.json'))); } catch { /* no legend values */ }
+  try { geo = JSON.parse(rec.bev_json()); } catch { /* no legend values */ }
   const elev = document.createElement('span');
   if (geo.elevation_min_m !== undefined) {
     elev.innerHTML = ` · elevation <span class="ramp"></span> ${geo.elevation_min_m.toFixed(2)} – ${geo.elevation_max_m.toFixed(2)} m · error 0 – 10 cm`;
@@ -345,14 +352,31 @@ async function showCameraView() {
   }
 }
 
-function showMap(rec, report) {
+// The finished map on screen, then its downloads (encoded once the map is shown).
+async function showMap(rec, report, mark) {
   const w = rec.width(), h = rec.height();
   for (const name of LAYERS) {
     let px;
     try { px = rec.layer(name); } catch { continue; }
     setLayer(name, px, w, h);
   }
-  const ex = listExports(rec);
+  showMetrics(report);
+  showLegend(report, rec);
+  $('cam-frame').max = String(rec.frames() - 1);
+  $('camera-panel').hidden = false;
+  $('viewer').hidden = false;
+  draw();
+  mark('mapShownS');
+  $('exports').textContent = 'Preparing the downloads…';
+  // Let the map paint before the files are encoded.
+  await new Promise((r) => requestAnimationFrame(() => setTimeout(r, 0)));
+  let ex;
+  try {
+    ex = listExports(rec);
+  } catch (e) {
+    $('exports').textContent = `The downloads could not be made: ${e}`;
+    return;
+  }
   // The layers as shown (visible ones, with their opacity) at map resolution.
   const shown = document.createElement('a');
   shown.textContent = 'map as shown.png';
@@ -394,12 +418,7 @@ function showMap(rec, report) {
     });
     ex.append(' ', review);
   }
-  showMetrics(report);
-  showLegend(report, rec);
-  $('cam-frame').max = String(rec.frames() - 1);
-  $('camera-panel').hidden = false;
-  $('viewer').hidden = false;
-  draw();
+  mark('exportsS');
   showCameraView();
 }
 
@@ -409,7 +428,7 @@ function mapGeo() {
   if (!view.rec) return null;
   if (geoCache && geoCache.rec === view.rec) return geoCache.geo;
   let geo = null;
-  try { geo = JSON.parse(new TextDecoder().decode(view.rec.file('bev.json'))); } catch { return null; }
+  try { geo = JSON.parse(view.rec.bev_json()); } catch { return null; }
   geoCache = { rec: view.rec, geo };
   return geo;
 }

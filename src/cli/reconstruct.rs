@@ -545,8 +545,19 @@ fn write_streamed(
             " (no PNG layers or elevation arrays: the map has over 2^28 pixels)"
         }
     );
+    let create = |n: &str| {
+        let p = out.join(n);
+        std::fs::File::create(&p)
+            .map(std::io::BufWriter::new)
+            .map_err(|e| format!("cannot create {}: {e}", p.display()))
+    };
     let mut bar = Progress::new("map");
-    let done = pollster::block_on(run.finish_streamed(b, name, &mut |d, t| bar.update(d, t)));
+    let done = pollster::block_on(run.finish_streamed(
+        b,
+        name,
+        create("map.rogsmap")?,
+        &mut |d, t| bar.update(d, t),
+    ));
     bar.finish();
     let done = done.map_err(|e| {
         format!(
@@ -558,10 +569,7 @@ fn write_streamed(
     let names = crate::export::layers::names(&g, &b.manifest, run.has_truth());
     let mut sinks = Vec::new();
     for n in &names {
-        let p = out.join(n);
-        let f =
-            std::fs::File::create(&p).map_err(|e| format!("cannot create {}: {e}", p.display()))?;
-        sinks.push((n.to_string(), std::io::BufWriter::new(f)));
+        sinks.push((n.to_string(), create(n)?));
     }
     let mut bar = Progress::new("layers");
     run.write_layers(b, done.range, &mut sinks, &mut |d, t| bar.update(d, t))?;
@@ -572,7 +580,10 @@ fn write_streamed(
     let json = |v: &serde_json::Value| serde_json::to_vec_pretty(v).map_err(|e| e.to_string());
     let mut files = crate::export::side_files(&g, &b.manifest, done.range, run.has_truth());
     files.push(("report.json".to_string(), json(&done.report)?));
-    files.push(("map.rogsmap".to_string(), done.map));
+    let mut map = done.map;
+    std::io::Write::flush(&mut map)
+        .map_err(|e| format!("{}: {e}", out.join("map.rogsmap").display()))?;
+    drop(map);
     if let Some(p) = run.pose_refiner() {
         files.push(("poses_refined.json".into(), json(&p.file(&b.manifest))?));
     }
@@ -582,7 +593,7 @@ fn write_streamed(
     }
     eprintln!(
         "wrote {} files to {}",
-        model + names.len() + files.len(),
+        model + 1 + names.len() + files.len(),
         out.display()
     );
     Ok(())

@@ -390,17 +390,30 @@ impl<W: std::io::Write + std::io::Seek> Writer<'_, W> {
 /// level-0 pixels from `src`, built into the pyramid tile by tile. Empty tiles are
 /// left out and marked so in `present`. `progress(done, total)` counts level-0 tiles.
 pub fn write_from(
-    mut index: MapIndex,
+    index: MapIndex,
     src: &dyn MapSource,
     report: &[u8],
     thumbnails: &[(usize, Vec<u8>)],
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Vec<u8>, String> {
+    let out = std::io::Cursor::new(Vec::new());
+    write_into(out, index, src, report, thumbnails, progress).map(|c| c.into_inner())
+}
+
+/// As `write_from`, into `out` (a file: the map is never held whole).
+pub fn write_into<W: std::io::Write + std::io::Seek>(
+    out: W,
+    mut index: MapIndex,
+    src: &dyn MapSource,
+    report: &[u8],
+    thumbnails: &[(usize, Vec<u8>)],
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<W, String> {
     index.levels = level_count(index.width, index.height);
     let mut w = Writer {
         index: &index,
         src,
-        zip: crate::bundle::ZipBundleWriter::new(std::io::Cursor::new(Vec::new())),
+        zip: crate::bundle::ZipBundleWriter::new(out),
         present: (0..index.levels)
             .map(|k| {
                 let (tx, ty) = index.tiles(k);
@@ -451,7 +464,7 @@ pub fn write_from(
     index.thumbnails = thumbnails.iter().map(|t| t.0).collect();
     let json = serde_json::to_vec_pretty(&index).map_err(|e| e.to_string())?;
     zip.add(INDEX, &json)?;
-    Ok(zip.finish_raw()?.into_inner())
+    zip.finish_raw()
 }
 
 /// A finished run's layers, held in memory, as a map source.

@@ -256,14 +256,8 @@ pub fn files(o: &Outcome, m: &Manifest) -> Result<Vec<(String, Vec<u8>)>, String
     Ok(out)
 }
 
-/// The map's small files beside its layers: `bev.json` (the geometry, and what the
-/// layers hold) and the legends of the colour-mapped layers.
-pub fn side_files(
-    g: &BevGeometry,
-    m: &Manifest,
-    (lo, hi): (f32, f32),
-    truth: bool,
-) -> Vec<(String, Vec<u8>)> {
+/// `bev.json`: the map's geometry, its elevation range and what its layers hold.
+pub fn bev_json(g: &BevGeometry, m: &Manifest, (lo, hi): (f32, f32)) -> serde_json::Value {
     let note = if layers::dense(g) {
         "origin is the world x of the west edge and y of the north edge; row 0 is north; \
          elevation.npy/.f32 hold world z in metres, NaN where the map is empty"
@@ -272,16 +266,26 @@ pub fn side_files(
          the map is too large for whole-image layers: they are in the tiled GeoTIFFs \
          (elevation.tif holds z in the dataset's frame) and map.rogsmap (docs/MAP.md)"
     };
-    let geo = serde_json::json!({
+    serde_json::json!({
         "origin": g.origin, "resolution": g.resolution, "width": g.width, "height": g.height,
         "note": note,
         "elevation_min_m": lo, "elevation_max_m": hi,
         "world_frame": m.world_frame, "frame": m.frame_description(),
-    });
+    })
+}
+
+/// The map's small files beside its layers: `bev.json` and the legends of the
+/// colour-mapped layers.
+pub fn side_files(
+    g: &BevGeometry,
+    m: &Manifest,
+    (lo, hi): (f32, f32),
+    truth: bool,
+) -> Vec<(String, Vec<u8>)> {
     let mut out = vec![
         (
             "bev.json".into(),
-            serde_json::to_vec_pretty(&geo).unwrap_or_default(),
+            serde_json::to_vec_pretty(&bev_json(g, m, (lo, hi))).unwrap_or_default(),
         ),
         (
             "elevation_legend.png".into(),

@@ -56,13 +56,22 @@ pub fn uniform(ctx: &GpuContext, label: &str, data: &[u8]) -> wgpu::Buffer {
     with_data(ctx, label, data, wgpu::BufferUsages::UNIFORM, 16)
 }
 
-/// A compute pipeline with an automatic layout from WGSL `parts`.
+/// A compute pipeline with an automatic layout from WGSL `parts`: made once per
+/// device, then the same one (`GpuContext`'s cache).
 pub fn pipeline(
     ctx: &GpuContext,
     label: &str,
     parts: &[&str],
     entry: &str,
 ) -> wgpu::ComputePipeline {
+    let key = (
+        label.to_string(),
+        entry.to_string(),
+        parts.iter().map(|p| p.to_string()).collect(),
+    );
+    if let Some(p) = ctx.cached_pipeline(&key) {
+        return p;
+    }
     let module = ctx.shader(label, parts);
     let p = ctx
         .device
@@ -75,6 +84,7 @@ pub fn pipeline(
             cache: None,
         });
     super::timing::name(&p, label);
+    ctx.cache_pipeline(key, &p);
     p
 }
 

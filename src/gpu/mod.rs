@@ -123,7 +123,16 @@ pub struct GpuContext {
     failure: std::sync::Arc<std::sync::Mutex<Option<String>>>,
     /// Set by the device-lost callback (`is_lost`).
     lost: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    /// The compute pipelines made on this device, by label, entry and source
+    /// (`buffers::pipeline`): each tile's trainer and rasteriser reuse them instead
+    /// of compiling them again (the page spends 4–5 s setting up the GPU for a run,
+    /// mostly on them).
+    pipelines: std::sync::Arc<std::sync::Mutex<PipelineCache>>,
 }
+
+/// Compute pipelines by (label, entry point, WGSL parts).
+type PipelineCache =
+    std::collections::HashMap<(String, String, Vec<String>), wgpu::ComputePipeline>;
 
 impl GpuContext {
     /// Bytes of GPU memory the device has reserved now (native Vulkan: wgpu's
@@ -232,7 +241,27 @@ impl GpuContext {
             limits,
             failure,
             lost,
+            pipelines: Default::default(),
         })
+    }
+
+    /// The pipeline made for `key`, if any.
+    pub(crate) fn cached_pipeline(
+        &self,
+        key: &(String, String, Vec<String>),
+    ) -> Option<wgpu::ComputePipeline> {
+        self.pipelines.lock().ok()?.get(key).cloned()
+    }
+
+    /// Keeps pipeline `p` for `key`.
+    pub(crate) fn cache_pipeline(
+        &self,
+        key: (String, String, Vec<String>),
+        p: &wgpu::ComputePipeline,
+    ) {
+        if let Ok(mut c) = self.pipelines.lock() {
+            c.insert(key, p.clone());
+        }
     }
 
     /// True once the device is lost (a driver reset, the browser reclaiming it, or

@@ -86,6 +86,49 @@ struct Kernels {
     pose: PoseGrad,
 }
 
+impl Kernels {
+    /// The trainer's pipelines (made once per device: `pipeline`'s cache).
+    fn new(ctx: &GpuContext) -> Self {
+        // The shaders' layout constants come from here, so host and kernel agree.
+        let block = format!(
+            "const BLOCK: u32 = {MOMENT_BLOCK}u;\nconst Z_MARGIN: f32 = {:?};",
+            crate::render::candidates::Z_MARGIN
+        );
+        let adam_src = [
+            block.as_str(),
+            AdamParams::WGSL,
+            include_str!("../../shaders/adam.wgsl"),
+        ];
+        let per = format!("const PER: u32 = {REGULARISE_PER}u;");
+        Kernels {
+            loss: pipeline(
+                ctx,
+                "loss",
+                &[LossParams::WGSL, include_str!("../../shaders/loss.wgsl")],
+                "main",
+            ),
+            regularise: pipeline(
+                ctx,
+                "regularise",
+                &[
+                    &VIEW_WGSL,
+                    GUARD_WGSL,
+                    &per,
+                    RegParams::WGSL,
+                    include_str!("../../shaders/regularise.wgsl"),
+                ],
+                "main",
+            ),
+            adam: pipeline(ctx, "adam", &adam_src, "main"),
+            exposure: pipeline(ctx, "adam_exposure", &adam_src, "step_exposure"),
+            sync: pipeline(ctx, "adam_sync_known", &adam_src, "sync_known"),
+            loss_sums: PartialSums::new(ctx, "loss_sums", 2, true),
+            reg_sums: PartialSums::new(ctx, "regularise_sums", 3, false),
+            pose: PoseGrad::new(ctx),
+        }
+    }
+}
+
 pub struct Trainer {
     pub ctx: GpuContext,
     pub raster: GpuRasterizer,
@@ -311,43 +354,7 @@ impl Trainer {
         raster.attr_window = cfg
             .moment_window
             .map(|b| (b as u32).saturating_mul(MOMENT_BLOCK));
-        // The shaders' layout constants come from here, so host and kernel agree.
-        let block = format!(
-            "const BLOCK: u32 = {MOMENT_BLOCK}u;\nconst Z_MARGIN: f32 = {:?};",
-            crate::render::candidates::Z_MARGIN
-        );
-        let adam_src = [
-            block.as_str(),
-            AdamParams::WGSL,
-            include_str!("../../shaders/adam.wgsl"),
-        ];
-        let per = format!("const PER: u32 = {REGULARISE_PER}u;");
-        let k = Kernels {
-            loss: pipeline(
-                &ctx,
-                "loss",
-                &[LossParams::WGSL, include_str!("../../shaders/loss.wgsl")],
-                "main",
-            ),
-            regularise: pipeline(
-                &ctx,
-                "regularise",
-                &[
-                    &VIEW_WGSL,
-                    GUARD_WGSL,
-                    &per,
-                    RegParams::WGSL,
-                    include_str!("../../shaders/regularise.wgsl"),
-                ],
-                "main",
-            ),
-            adam: pipeline(&ctx, "adam", &adam_src, "main"),
-            exposure: pipeline(&ctx, "adam_exposure", &adam_src, "step_exposure"),
-            sync: pipeline(&ctx, "adam_sync_known", &adam_src, "sync_known"),
-            loss_sums: PartialSums::new(&ctx, "loss_sums", 2, true),
-            reg_sums: PartialSums::new(&ctx, "regularise_sums", 3, false),
-            pose: PoseGrad::new(&ctx),
-        };
+        let k = Kernels::new(&ctx);
         let n = p.len() as u64;
         let slots = learnable(p.channels) as u32;
         let windows = moment_windows(&ctx, n as u32, slots, cfg.moment_window);

@@ -61,7 +61,8 @@ pub fn view_bytes_per_pixel(channels: usize) -> u64 {
     4 * PIX_STRIDE.max(channels) as u64
 }
 
-pub struct GpuRasterizer {
+/// The rasteriser's compute pipelines.
+struct RasterKernels {
     project: wgpu::ComputePipeline,
     scan_blocks: wgpu::ComputePipeline,
     scan_sums: wgpu::ComputePipeline,
@@ -72,6 +73,91 @@ pub struct GpuRasterizer {
     raster: wgpu::ComputePipeline,
     raster_bwd: wgpu::ComputePipeline,
     project_bwd: wgpu::ComputePipeline,
+}
+
+impl RasterKernels {
+    /// The pipelines for `channels` logit channels, the backward pass's gradient
+    /// adds by `strategy`, reduced over subgroups first or not.
+    fn new(ctx: &GpuContext, strategy: AccumStrategy, subgroups: bool, channels: u32) -> Self {
+        let ch = channels_wgsl(channels);
+        let lanes = if subgroups {
+            include_str!("../../shaders/lanes_subgroup.wgsl")
+        } else {
+            include_str!("../../shaders/lanes_single.wgsl")
+        };
+        let pipe = |label: &str, parts: &[&str], entry: &str| pipeline(ctx, label, parts, entry);
+        let scan_per = format!("const PER: u32 = {SCAN_PER}u;");
+        let scan = include_str!("../../shaders/scan.wgsl");
+        Self {
+            project: pipe(
+                "project",
+                &[&VIEW_WGSL, include_str!("../../shaders/project.wgsl")],
+                "main",
+            ),
+            scan_blocks: pipe(
+                "scan_blocks",
+                &[WORKGROUP_WGSL, &scan_per, scan],
+                "scan_blocks",
+            ),
+            scan_sums: pipe("scan_sums", &[WORKGROUP_WGSL, &scan_per, scan], "scan_sums"),
+            add_offsets: pipe(
+                "add_offsets",
+                &[WORKGROUP_WGSL, &scan_per, scan],
+                "add_offsets",
+            ),
+            gather: pipe(
+                "gather",
+                &[&ch, include_str!("../../shaders/gather.wgsl")],
+                "main",
+            ),
+            emit: pipe(
+                "emit",
+                &[&VIEW_WGSL, include_str!("../../shaders/emit.wgsl")],
+                "main",
+            ),
+            ranges: pipe(
+                "tile_ranges",
+                &[&VIEW_WGSL, include_str!("../../shaders/tile_ranges.wgsl")],
+                "main",
+            ),
+            raster: pipe(
+                "rasterize",
+                &[
+                    &ch,
+                    &VIEW_WGSL,
+                    LOAD_SURFEL_WGSL,
+                    include_str!("../../shaders/rasterize.wgsl"),
+                ],
+                "main",
+            ),
+            raster_bwd: pipe(
+                "rasterize_backward",
+                &[
+                    // The `diagnostic` directive in `lanes` must come first.
+                    lanes,
+                    &ch,
+                    strategy.wgsl(),
+                    &VIEW_WGSL,
+                    LOAD_SURFEL_WGSL,
+                    include_str!("../../shaders/rasterize_backward.wgsl"),
+                ],
+                "main",
+            ),
+            project_bwd: pipe(
+                "project_backward",
+                &[
+                    &VIEW_WGSL,
+                    GUARD_WGSL,
+                    include_str!("../../shaders/project_backward.wgsl"),
+                ],
+                "main",
+            ),
+        }
+    }
+}
+
+pub struct GpuRasterizer {
+    k: RasterKernels,
     sorter: RadixSorter,
     /// Logit channels the compositing kernels were built for (`CH` in them).
     channels: u32,
@@ -202,80 +288,9 @@ impl GpuRasterizer {
         subgroups: bool,
         channels: u32,
     ) -> Result<Self, GpuError> {
-        let ch = channels_wgsl(channels);
-        let lanes = if subgroups {
-            include_str!("../../shaders/lanes_subgroup.wgsl")
-        } else {
-            include_str!("../../shaders/lanes_single.wgsl")
-        };
-        let pipe = |label: &str, parts: &[&str], entry: &str| pipeline(ctx, label, parts, entry);
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let scan_per = format!("const PER: u32 = {SCAN_PER}u;");
-        let scan = include_str!("../../shaders/scan.wgsl");
         let me = Self {
-            project: pipe(
-                "project",
-                &[&VIEW_WGSL, include_str!("../../shaders/project.wgsl")],
-                "main",
-            ),
-            scan_blocks: pipe(
-                "scan_blocks",
-                &[WORKGROUP_WGSL, &scan_per, scan],
-                "scan_blocks",
-            ),
-            scan_sums: pipe("scan_sums", &[WORKGROUP_WGSL, &scan_per, scan], "scan_sums"),
-            add_offsets: pipe(
-                "add_offsets",
-                &[WORKGROUP_WGSL, &scan_per, scan],
-                "add_offsets",
-            ),
-            gather: pipe(
-                "gather",
-                &[&ch, include_str!("../../shaders/gather.wgsl")],
-                "main",
-            ),
-            emit: pipe(
-                "emit",
-                &[&VIEW_WGSL, include_str!("../../shaders/emit.wgsl")],
-                "main",
-            ),
-            ranges: pipe(
-                "tile_ranges",
-                &[&VIEW_WGSL, include_str!("../../shaders/tile_ranges.wgsl")],
-                "main",
-            ),
-            raster: pipe(
-                "rasterize",
-                &[
-                    &ch,
-                    &VIEW_WGSL,
-                    LOAD_SURFEL_WGSL,
-                    include_str!("../../shaders/rasterize.wgsl"),
-                ],
-                "main",
-            ),
-            raster_bwd: pipe(
-                "rasterize_backward",
-                &[
-                    // The `diagnostic` directive in `lanes` must come first.
-                    lanes,
-                    &ch,
-                    strategy.wgsl(),
-                    &VIEW_WGSL,
-                    LOAD_SURFEL_WGSL,
-                    include_str!("../../shaders/rasterize_backward.wgsl"),
-                ],
-                "main",
-            ),
-            project_bwd: pipe(
-                "project_backward",
-                &[
-                    &VIEW_WGSL,
-                    GUARD_WGSL,
-                    include_str!("../../shaders/project_backward.wgsl"),
-                ],
-                "main",
-            ),
+            k: RasterKernels::new(ctx, strategy, subgroups, channels),
             sorter: RadixSorter::new(ctx).await?,
             channels,
             attr_window: None,
@@ -414,7 +429,7 @@ impl GpuRasterizer {
         }
         let bg = bind(
             ctx,
-            &self.project,
+            &self.k.project,
             &[
                 (0, &view),
                 (1, &p.pos),
@@ -427,7 +442,7 @@ impl GpuRasterizer {
                 (8, &cand_buf),
             ],
         );
-        dispatch(&mut enc, &self.project, &bg, (gx, gy, 1));
+        dispatch(&mut enc, &self.k.project, &bg, (gx, gy, 1));
         let stride = attr_stride(p.channels) as u64;
         let attrs = storage(ctx, "attrs", 4 * stride * n as u64);
         self.encode_gather(ctx, &mut enc, p, &cand, &cand_buf, &attrs);
@@ -435,7 +450,7 @@ impl GpuRasterizer {
         if n > 0 {
             let bg = bind(
                 ctx,
-                &self.scan_blocks,
+                &self.k.scan_blocks,
                 &[
                     (0, &counts),
                     (1, &offsets),
@@ -443,21 +458,21 @@ impl GpuRasterizer {
                     (4, &scan_params),
                 ],
             );
-            dispatch(&mut enc, &self.scan_blocks, &bg, (bx, by, 1));
+            dispatch(&mut enc, &self.k.scan_blocks, &bg, (bx, by, 1));
         }
         let bg = bind(
             ctx,
-            &self.scan_sums,
+            &self.k.scan_sums,
             &[(2, &block_sums), (3, &total), (4, &scan_params)],
         );
-        dispatch(&mut enc, &self.scan_sums, &bg, (1, 1, 1));
+        dispatch(&mut enc, &self.k.scan_sums, &bg, (1, 1, 1));
         if n > 0 {
             let bg = bind(
                 ctx,
-                &self.add_offsets,
+                &self.k.add_offsets,
                 &[(1, &offsets), (2, &block_sums), (4, &scan_params)],
             );
-            dispatch(&mut enc, &self.add_offsets, &bg, (gx, gy, 1));
+            dispatch(&mut enc, &self.k.add_offsets, &bg, (gx, gy, 1));
         }
         ctx.queue.submit([enc.finish()]);
         let max_pairs = ctx.limits.max_storage_buffer_binding_size / 4;
@@ -511,7 +526,7 @@ impl GpuRasterizer {
         );
         let bg = bind(
             ctx,
-            &self.emit,
+            &self.k.emit,
             &[
                 (0, &out.view),
                 (1, &out.proj),
@@ -522,7 +537,7 @@ impl GpuRasterizer {
                 (6, &grid_cap),
             ],
         );
-        dispatch(&mut enc, &self.emit, &bg, (gx, gy, 1));
+        dispatch(&mut enc, &self.k.emit, &bg, (gx, gy, 1));
         let scratch = self.sorter.scratch(ctx, cap);
         let pairs_in = SortPairs {
             keys_a: &keys_a,
@@ -547,7 +562,7 @@ impl GpuRasterizer {
         );
         let bg = bind(
             ctx,
-            &self.ranges,
+            &self.k.ranges,
             &[
                 (0, &out.view),
                 (1, keys),
@@ -556,10 +571,10 @@ impl GpuRasterizer {
                 (4, &grid_pairs),
             ],
         );
-        dispatch(&mut enc, &self.ranges, &bg, (px, py, 1));
+        dispatch(&mut enc, &self.k.ranges, &bg, (px, py, 1));
         let bg = bind(
             ctx,
-            &self.raster,
+            &self.k.raster,
             &[
                 (0, &out.view),
                 (1, &out.proj),
@@ -573,7 +588,7 @@ impl GpuRasterizer {
         );
         dispatch(
             &mut enc,
-            &self.raster,
+            &self.k.raster,
             &bg,
             (cam.tiles_x(), cam.tiles_y(), 1),
         );
@@ -625,7 +640,7 @@ impl GpuRasterizer {
             let (first, surfels) = (b0 as u64, (b1 - b0) as u64);
             let bg = bind_ranges(
                 ctx,
-                &self.gather,
+                &self.k.gather,
                 &[
                     (0, u.as_entire_buffer_binding()),
                     (1, cand_buf.as_entire_buffer_binding()),
@@ -634,7 +649,7 @@ impl GpuRasterizer {
                     (4, attrs.as_entire_buffer_binding()),
                 ],
             );
-            dispatch(enc, &self.gather, &bg, (gx, gy, 1));
+            dispatch(enc, &self.k.gather, &bg, (gx, gy, 1));
         }
     }
 
@@ -681,7 +696,7 @@ impl GpuRasterizer {
         enc.clear_buffer(view_grad, 0, None);
         let bg = bind(
             ctx,
-            &self.raster_bwd,
+            &self.k.raster_bwd,
             &[
                 (0, view_grad),
                 (1, &f.view),
@@ -696,7 +711,7 @@ impl GpuRasterizer {
         );
         dispatch(
             enc,
-            &self.raster_bwd,
+            &self.k.raster_bwd,
             &bg,
             (f.width.div_ceil(TILE), f.height.div_ceil(TILE), 1),
         );
@@ -705,7 +720,7 @@ impl GpuRasterizer {
         let grid = uniform(ctx, "grid", bytemuck::cast_slice(&[gx * 256, 0u32, 0, 0]));
         let bg = bind(
             ctx,
-            &self.project_bwd,
+            &self.k.project_bwd,
             &[
                 (0, &f.view),
                 (1, view_grad),
@@ -717,7 +732,7 @@ impl GpuRasterizer {
                 (7, &f.cand_buf),
             ],
         );
-        dispatch(enc, &self.project_bwd, &bg, (gx, gy, 1));
+        dispatch(enc, &self.k.project_bwd, &bg, (gx, gy, 1));
     }
 
     /// Parameter gradients of every surfel (same layout as `Params`, zero outside the

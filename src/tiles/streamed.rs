@@ -17,9 +17,10 @@ use crate::render::Params;
 use std::io::{Seek, Write};
 use web_time::Instant;
 
-/// A streamed map: the map file and the report it holds.
-pub struct StreamedMap {
-    pub map: Vec<u8>,
+/// A streamed map: the map file (written into the sink given) and the report it
+/// holds.
+pub struct StreamedMap<W> {
+    pub map: W,
     pub report: serde_json::Value,
     pub outcome: Outcome,
     /// The elevation's range over the whole map (the elevation layer's colours).
@@ -65,15 +66,16 @@ impl MapSource for BlockSource<'_> {
 
 impl TiledRun {
     /// The map of a run whose whole layers would not fit (`streamed`), written block
-    /// by block: map.rogsmap with every layer, and report.json (metrics against the
+    /// by block: map.rogsmap (into `map`) with every layer, and report.json (metrics against the
     /// truth summed over the blocks; seams over neighbouring pixels of one block).
     /// `progress(done, total)` counts blocks twice: scoring, then writing.
-    pub async fn finish_streamed(
+    pub async fn finish_streamed<W: Write + Seek>(
         &mut self,
         b: &Bundle,
         bundle: &str,
+        map: W,
         progress: &mut dyn FnMut(usize, usize),
-    ) -> Result<StreamedMap, ReconstructError> {
+    ) -> Result<StreamedMap<W>, ReconstructError> {
         if self.session.is_some() && !self.recorded && self.failed.is_none() {
             self.record(b).await?;
         }
@@ -152,7 +154,8 @@ impl TiledRun {
         let bytes = serde_json::to_vec_pretty(&report)
             .map_err(|e| ReconstructError::Write(e.to_string()))?;
         let n = blocks.len();
-        let map = map_file::write_from(
+        let map = map_file::write_into(
+            map,
             index.clone(),
             &src,
             &bytes,

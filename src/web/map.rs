@@ -24,7 +24,13 @@ pub struct Reconstruction {
     /// The map's geometry, known from the start so that previews line up with it.
     geometry: BevGeometry,
     outcome: Option<Outcome>,
+    /// The export files: the model's once training ends, the map's made on first
+    /// use (`ensure_files`), so that the map shows before they are encoded.
     files: Vec<(String, Vec<u8>)>,
+    /// Whether the map's files are in `files` yet.
+    map_files: bool,
+    /// report.json of the finished map.
+    report: Option<String>,
     ply_up: crate::export::ply::Up,
     /// For a bundle read lazily: its stores and the page's reader.
     lazy: Option<(LazyFiles, js_sys::Function)>,
@@ -147,6 +153,8 @@ async fn start(
         geometry,
         outcome: None,
         files: Vec::new(),
+        map_files: false,
+        report: None,
         ply_up,
         lazy,
     })
@@ -225,18 +233,30 @@ impl Reconstruction {
         let (p, origin) = self.run.model();
         self.files =
             crate::export::model_files(p.held(), origin, &self.bundle.manifest, self.ply_up);
+        self.map_files = false;
         let o = o.map_err(err)?;
-        let mut files = crate::export::files(&o, &self.bundle.manifest).map_err(err)?;
         let r = self
             .run
             .report(&self.bundle, &o, &self.bundle.manifest.name);
         let text = serde_json::to_string_pretty(&r).map_err(err)?;
+        self.outcome = Some(o);
+        self.report = Some(text.clone());
+        Ok(text)
+    }
+
+    /// The finished map's files (layers, report.json, map.rogsmap) beside the
+    /// model's, encoded once, when first asked for: the page shows the map first.
+    fn ensure_files(&mut self) -> Result<(), JsValue> {
+        let (Some(o), Some(text), false) = (&self.outcome, &self.report, self.map_files) else {
+            return Ok(());
+        };
+        let mut files = crate::export::files(o, &self.bundle.manifest).map_err(err)?;
         files.push(("report.json".into(), text.clone().into_bytes()));
-        let map = crate::export::map_file::write(&o, &self.bundle, text.as_bytes()).map_err(err)?;
+        let map = crate::export::map_file::write(o, &self.bundle, text.as_bytes()).map_err(err)?;
         files.push(("map.rogsmap".into(), map));
         self.files.extend(files);
-        self.outcome = Some(o);
-        Ok(text)
+        self.map_files = true;
+        Ok(())
     }
 
     /// Map width and height in pixels (the same for previews and the final layers).
@@ -323,13 +343,24 @@ impl Reconstruction {
             .ok_or_else(|| err(format!("no layer {name:?} for this map")))
     }
 
-    /// Names of the export files.
-    pub fn file_names(&self) -> Vec<String> {
-        self.files.iter().map(|f| f.0.clone()).collect()
+    /// bev.json of the finished map (geometry, elevation range), without encoding
+    /// its files.
+    pub fn bev_json(&self) -> Result<String, JsValue> {
+        let o = self.outcome.as_ref().ok_or_else(|| err("finish first"))?;
+        let range = crate::export::range(&crate::export::elevation(o));
+        let v = crate::export::bev_json(&o.geometry, &self.bundle.manifest, range);
+        serde_json::to_string(&v).map_err(err)
+    }
+
+    /// Names of the export files (the map's are encoded on the first call).
+    pub fn file_names(&mut self) -> Result<Vec<String>, JsValue> {
+        self.ensure_files()?;
+        Ok(self.files.iter().map(|f| f.0.clone()).collect())
     }
 
     /// The bytes of one export file.
-    pub fn file(&self, name: &str) -> Result<Vec<u8>, JsValue> {
+    pub fn file(&mut self, name: &str) -> Result<Vec<u8>, JsValue> {
+        self.ensure_files()?;
         self.files
             .iter()
             .find(|f| f.0 == name)
@@ -338,7 +369,8 @@ impl Reconstruction {
     }
 
     /// Every export file in one zip (the CLI's output folder, zipped).
-    pub fn exports_zip(&self) -> Result<Vec<u8>, JsValue> {
+    pub fn exports_zip(&mut self) -> Result<Vec<u8>, JsValue> {
+        self.ensure_files()?;
         let mut z = crate::bundle::ZipBundleWriter::new(std::io::Cursor::new(Vec::new()));
         for (name, bytes) in &self.files {
             z.add(name, bytes).map_err(err)?;

@@ -157,7 +157,7 @@ fn tiles_advice(blocks: Option<u64>) -> String {
             b.div_ceil(1 << 20)
         ),
         None => "map it in tiles (--tile-m: natively, a tiled map too large for whole layers \
-                 is written tile by tile into map.rogsmap), "
+                 is written block by block), "
             .into(),
     }
 }

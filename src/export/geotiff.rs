@@ -58,31 +58,22 @@ const DOUBLE: u16 = 12;
 /// One IFD entry: tag, type, count and the value's little-endian bytes.
 struct Entry(u16, u16, u32, Vec<u8>);
 
+/// An entry of `ty` holding `v`'s values, each as its little-endian bytes.
+fn entry<const N: usize>(tag: u16, ty: u16, v: impl ExactSizeIterator<Item = [u8; N]>) -> Entry {
+    let count = v.len() as u32;
+    Entry(tag, ty, count, v.flatten().collect())
+}
+
 fn shorts(tag: u16, v: &[u16]) -> Entry {
-    Entry(
-        tag,
-        SHORT,
-        v.len() as u32,
-        v.iter().flat_map(|x| x.to_le_bytes()).collect(),
-    )
+    entry(tag, SHORT, v.iter().map(|x| x.to_le_bytes()))
 }
 
 fn longs(tag: u16, v: &[u32]) -> Entry {
-    Entry(
-        tag,
-        LONG,
-        v.len() as u32,
-        v.iter().flat_map(|x| x.to_le_bytes()).collect(),
-    )
+    entry(tag, LONG, v.iter().map(|x| x.to_le_bytes()))
 }
 
 fn doubles(tag: u16, v: &[f64]) -> Entry {
-    Entry(
-        tag,
-        DOUBLE,
-        v.len() as u32,
-        v.iter().flat_map(|x| x.to_le_bytes()).collect(),
-    )
+    entry(tag, DOUBLE, v.iter().map(|x| x.to_le_bytes()))
 }
 
 fn ascii(tag: u16, s: &str) -> Entry {

@@ -363,19 +363,18 @@ impl<'a, W: Write + Seek> LayerFiles<'a, W> {
         }
         let width = self.g.width as usize;
         self.pending.sort_by_key(|p| (p.row, p.col));
-        let mut rows: Vec<Vec<u8>> = self
+        // Each layer's empty row, copied under every row before the rectangles.
+        let empty: Vec<Vec<u8>> = self
             .sources
             .iter()
             .map(|s| s.empty().repeat(width))
             .collect();
+        let mut rows = empty.clone();
         for y in self.written..until {
             for (k, s) in self.sources.iter().enumerate() {
                 let b = s.bytes();
                 let row = &mut rows[k];
-                let empty = s.empty();
-                for c in row.chunks_exact_mut(b) {
-                    c.copy_from_slice(&empty);
-                }
+                row.copy_from_slice(&empty[k]);
                 for p in self
                     .pending
                     .iter()

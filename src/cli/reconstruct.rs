@@ -384,6 +384,7 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
         run.checkpoints = true;
         // The finished tiles' surfels are in their checkpoints: not held twice.
         run.spill_models(tiles_dir.clone());
+        run.write_checkpoints_into(tiles_dir.clone());
         if a.resume {
             match resume(&mut run, &tiles_dir) {
                 Ok(n) => eprintln!(

@@ -26,12 +26,46 @@ pub struct CamView {
 }
 
 /// Where a world point lands in a view.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 pub struct Projection {
     pub cam: u32,
     pub u: f32,
     pub v: f32,
     pub depth: f32,
+}
+
+/// Most views kept of one point: the nearest, and the next ones to fall back on
+/// where the nearest's label ignores the pixel.
+pub const MAX_VIEWS: usize = 3;
+
+/// Up to `MAX_VIEWS` views of one point, nearest first, held inline. Every surfel
+/// of a tile keeps its views until the images are sampled; a heap allocation
+/// apiece (millions at 5 cm, made on worker threads between a tile's larger
+/// buffers) left the allocator's pages fragmented and resident memory creeping up
+/// tile after tile.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Views {
+    len: u8,
+    list: [Projection; MAX_VIEWS],
+}
+
+impl Views {
+    /// The first `MAX_VIEWS` of `v`.
+    pub fn new(v: &[Projection]) -> Self {
+        let mut out = Views::default();
+        for (slot, p) in out.list.iter_mut().zip(v) {
+            *slot = *p;
+            out.len += 1;
+        }
+        out
+    }
+}
+
+impl std::ops::Deref for Views {
+    type Target = [Projection];
+    fn deref(&self) -> &[Projection] {
+        &self.list[..self.len as usize]
+    }
 }
 
 /// All views of a bundle, by frame.
@@ -123,7 +157,7 @@ impl Cams {
         frames: usize,
         n: usize,
         use_frame: &(dyn Fn(usize) -> bool + Sync),
-    ) -> (Vec<usize>, Vec<Projection>) {
+    ) -> (Vec<usize>, Views) {
         let mut k = frames.max(1);
         loop {
             let near = poses.nearest(p[0], p[1], k);
@@ -143,8 +177,9 @@ impl Cams {
         }
     }
 
-    /// Up to `n` views of `p` among the cameras of `frames`, nearest first.
-    pub fn candidates_in(&self, frames: &[usize], p: [f64; 3], n: usize) -> Vec<Projection> {
+    /// Up to `n` (at most `MAX_VIEWS`) views of `p` among the cameras of `frames`,
+    /// nearest first.
+    pub fn candidates_in(&self, frames: &[usize], p: [f64; 3], n: usize) -> Views {
         let mut out: Vec<Projection> = frames
             .iter()
             .flat_map(|&f| {
@@ -155,8 +190,7 @@ impl Cams {
             })
             .collect();
         out.sort_by(|a, b| a.depth.total_cmp(&b.depth));
-        out.truncate(n);
-        out
+        Views::new(&out[..n.min(out.len())])
     }
 }
 
@@ -172,7 +206,7 @@ pub struct ViewImages {
 pub fn sample_best<F>(
     b: &Bundle,
     cams: &Cams,
-    candidates: &[Vec<Projection>],
+    candidates: &[Views],
     mut f: F,
 ) -> Result<usize, Problem>
 where
@@ -252,7 +286,7 @@ pub fn mosaic(b: &Bundle, grid: &Grid, z: &[f32], poses: &PoseIndex) -> Result<B
     ];
     let mut out = BevRaster::empty(origin, res, w, h);
     let base: Vec<usize> = (0..grid.len()).filter(|&k| grid.level[k] == 0).collect();
-    let candidates: Vec<Vec<Projection>> = crate::par::par_map(base.len(), |i| {
+    let candidates: Vec<Views> = crate::par::par_map(base.len(), |i| {
         let k = base[i];
         let [x, y] = grid.xy(k);
         let p = [x, y, z[k] as f64];
@@ -287,7 +321,7 @@ pub fn surfel_colours(
     use_frame: &(dyn Fn(usize) -> bool + Sync),
 ) -> Result<Vec<Option<SurfelColour>>, Problem> {
     let cams = Cams::new(&b.manifest);
-    let candidates: Vec<Vec<Projection>> = crate::par::par_map(grid.len(), |k| {
+    let candidates: Vec<Views> = crate::par::par_map(grid.len(), |k| {
         let [x, y] = grid.xy(k);
         let p = [x, y, z[k] as f64];
         cams.views_near(poses, p, candidate_frames(b), 3, use_frame)
@@ -300,4 +334,23 @@ pub fn surfel_colours(
         out[k] = Some((c.map(|v| v as f32 / 255.0), id));
     })?;
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn views_keep_the_nearest_first_up_to_their_capacity() {
+        let p = |d: f32| Projection {
+            cam: d as u32,
+            depth: d,
+            ..Default::default()
+        };
+        let all: Vec<Projection> = (1..=5).map(|d| p(d as f32)).collect();
+        let cams = |v: &Views| v.iter().map(|q| q.cam).collect::<Vec<_>>();
+        assert_eq!(cams(&Views::new(&all)), [1, 2, 3]);
+        assert_eq!(cams(&Views::new(&all[..2])), [1, 2]);
+        assert!(Views::new(&[]).is_empty());
+    }
 }

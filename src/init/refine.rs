@@ -11,7 +11,7 @@
 //! marking edge (G and S) or a curb (Z and S) does. Cells above tau_a split 2×2: new surfels at the cell centre and edge midpoints, shared edge
 //! vertices created once (the index map deduplicates).
 
-use super::ipm::{candidate_frames, sample_best, Cams, Projection};
+use super::ipm::{candidate_frames, sample_best, Cams, Views};
 use super::PoseIndex;
 use crate::bundle::{Bundle, ClassRole, Problem};
 use crate::grid::Grid;
@@ -116,7 +116,7 @@ pub fn refine(
         })
         .0
     });
-    let candidates: Vec<Vec<Projection>> = crate::par::par_map(centres.len(), |i| {
+    let candidates: Vec<Views> = crate::par::par_map(centres.len(), |i| {
         let key = block_of(cells[i]);
         let k = blocks.partition_point(|b| b.0 < key);
         cams.candidates_in(&block_frames[k], centres[i], 2)

@@ -89,8 +89,46 @@ fn le<T: bytemuck::Pod>(v: &[T]) -> &[u8] {
     bytemuck::cast_slice(v)
 }
 
-/// The checkpoint file of `f` for a run of fingerprint `fingerprint`.
+/// The checkpoint file of `f` for a run of fingerprint `fingerprint`, in memory
+/// (the page, which has no disk; the buffer is sized once for the raw arrays).
 pub fn encode(f: &Finished, fingerprint: u64) -> Result<Vec<u8>, String> {
+    let raw = f.layers.as_ref().map_or(0, |l| {
+        4 * (l.bev.rgb.len() + l.bev.logits.len() + l.bev.elevation.len() + l.bev.alpha.len())
+            + 4 * (l.confidence.len() + l.density.len())
+    }) + f.model.len() * (4 * (3 + 3 + 2 + 1 + 4) + 4 * f.model.channels)
+        + 24 * f.centres.len();
+    let out = Cursor::new(Vec::with_capacity(raw + (1 << 16)));
+    Ok(encode_into(f, fingerprint, out)?.into_inner())
+}
+
+/// Natively: writes the checkpoint of `f` into `dir/name` as it is encoded, with no
+/// copy of it in memory (`name.part`, then renamed: a run killed while writing
+/// leaves no half checkpoint). Returns the file's path.
+pub fn write_file(
+    f: &Finished,
+    fingerprint: u64,
+    dir: &std::path::Path,
+    name: &str,
+) -> Result<std::path::PathBuf, String> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+    let part = dir.join(format!("{name}.part"));
+    let cannot = |e: &dyn std::fmt::Display| format!("cannot write {}: {e}", part.display());
+    let file = std::fs::File::create(&part).map_err(|e| cannot(&e))?;
+    encode_into(f, fingerprint, std::io::BufWriter::new(file))
+        .map_err(|e| cannot(&e))?
+        .into_inner()
+        .map_err(|e| cannot(&e))?;
+    let to = dir.join(name);
+    std::fs::rename(&part, &to).map_err(|e| format!("cannot write {}: {e}", to.display()))?;
+    Ok(to)
+}
+
+/// The checkpoint file of `f` for a run of fingerprint `fingerprint`, into `w`.
+fn encode_into<W: std::io::Write + std::io::Seek>(
+    f: &Finished,
+    fingerprint: u64,
+    w: W,
+) -> Result<W, String> {
     let h = Header {
         format: FORMAT.into(),
         version: VERSION,
@@ -113,7 +151,7 @@ pub fn encode(f: &Finished, fingerprint: u64) -> Result<Vec<u8>, String> {
         holdout_views: f.holdout_views,
     };
     let json = serde_json::to_vec_pretty(&h).map_err(|e| e.to_string())?;
-    let mut zip = zip::ZipWriter::new(Cursor::new(Vec::new()));
+    let mut zip = zip::ZipWriter::new(w);
     let opts = zip::write::SimpleFileOptions::default()
         .compression_method(zip::CompressionMethod::Deflated)
         .compression_level(Some(1));
@@ -139,7 +177,7 @@ pub fn encode(f: &Finished, fingerprint: u64) -> Result<Vec<u8>, String> {
     add("surfels/rotation.f32", le(&p.rotation))?;
     add("surfels/logits.f32", le(&p.logits))?;
     add("centres.f64", le(&f.centres))?;
-    Ok(zip.finish().map_err(|e| e.to_string())?.into_inner())
+    zip.finish().map_err(|e| e.to_string())
 }
 
 /// Reads a checkpoint; `Err` says which entry is wrong and what it should hold.
@@ -308,4 +346,44 @@ fn read_f32<R: Read + std::io::Seek>(
         .chunks_exact(4)
         .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
         .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A checkpoint written into its file as it is encoded is the one encoded in
+    /// memory, byte for byte, decodes to the same tile, and leaves no `.part`.
+    #[test]
+    fn written_into_its_file_as_encoded_in_memory() {
+        let mut f = Finished {
+            index: 3,
+            centres: vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.5]],
+            ..Default::default()
+        };
+        f.model.channels = 2;
+        for k in 0..2 {
+            f.model.pos.push([k as f32, 1.0, 0.25]);
+            f.model.rgb.push([0.5; 3]);
+            f.model.log_scale.push([-3.0; 2]);
+            f.model.opacity.push(0.9);
+            f.model.rotation.push([1.0, 0.0, 0.0, 0.0]);
+            f.model.logits.extend([0.1, k as f32]);
+        }
+        f.report.name = "x1_y2".into();
+        let dir = std::env::temp_dir().join(format!("rogs-ckpt-{}", std::process::id()));
+        let path = write_file(&f, 7, &dir, "x1_y2.tile").expect("write");
+        let bytes = std::fs::read(&path).expect("read");
+        assert_eq!(bytes, encode(&f, 7).expect("encode"));
+        let (back, fingerprint) = decode(&bytes).expect("decode");
+        assert_eq!((back.index, fingerprint), (3, 7));
+        assert_eq!(back.model.logits, f.model.logits);
+        assert_eq!(back.centres, f.centres);
+        let names: Vec<_> = std::fs::read_dir(&dir)
+            .expect("dir")
+            .filter_map(|e| e.ok().map(|e| e.file_name()))
+            .collect();
+        assert_eq!(names, ["x1_y2.tile"], "only the renamed file is left");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

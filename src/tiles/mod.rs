@@ -415,6 +415,9 @@ pub struct TiledRun {
     /// Encode a checkpoint of every tile as it finishes (`take_checkpoint`).
     pub checkpoints: bool,
     pending: std::collections::VecDeque<(String, Vec<u8>)>,
+    /// Natively: where checkpoints are written as they are encoded
+    /// (`write_checkpoints_into`) instead of queued in memory.
+    checkpoint_dir: Option<std::path::PathBuf>,
     /// Hash of the manifest, the settings and the plan: checkpoints carry it.
     pub fingerprint: u64,
     /// Fault injection for tests of failure and resume: the GPU device is destroyed
@@ -503,6 +506,7 @@ impl TiledRun {
             failed_index: None,
             done: Vec::new(),
             checkpoints: false,
+            checkpoint_dir: None,
             pending: Default::default(),
             fingerprint: 0,
             fault_tile: None,
@@ -763,11 +767,7 @@ impl TiledRun {
                     // A skipped tile is finished too: its checkpoint says so, and a
                     // resumed run or a merge of tile jobs does not try it again.
                     if self.checkpoints {
-                        self.pending.push_back((
-                            format!("{}{}", skipped.report.name, checkpoint::SUFFIX),
-                            checkpoint::encode(&skipped, self.fingerprint)
-                                .map_err(GpuError::Failed)?,
-                        ));
+                        self.keep_checkpoint(&skipped)?;
                     }
                     self.apply(skipped, None);
                 }
@@ -862,11 +862,10 @@ impl TiledRun {
         let mut file = None;
         if self.checkpoints && tile.is_some() && s.stopped.is_none() {
             let name = format!("{}{}", done.report.name, checkpoint::SUFFIX);
-            file = self.model.spill_to.as_ref().map(|d| d.join(&name));
-            self.pending.push_back((
-                name,
-                checkpoint::encode(&done, self.fingerprint).map_err(GpuError::Failed)?,
-            ));
+            file = match self.keep_checkpoint(&done)? {
+                Some(written) => Some(written),
+                None => self.model.spill_to.as_ref().map(|d| d.join(&name)),
+            };
         }
         self.apply(done, file);
         self.recorded = true;
@@ -905,6 +904,7 @@ impl TiledRun {
         }
         self.seal_finished_blocks();
         let mut report = f.report;
+        crate::mem::release_free_memory();
         report.host_bytes = crate::mem::host_bytes();
         self.reports.push(report);
     }
@@ -932,6 +932,28 @@ impl TiledRun {
             "blocks_open": open,
             "blocks_sealed": sealed,
         });
+    }
+
+    /// Keeps the checkpoint of a finished (or skipped) tile: natively straight into
+    /// its file (`write_checkpoints_into`; returns the path), else queued for
+    /// `take_checkpoint`.
+    fn keep_checkpoint(&mut self, f: &Finished) -> Result<Option<std::path::PathBuf>, GpuError> {
+        let name = format!("{}{}", f.report.name, checkpoint::SUFFIX);
+        if let Some(dir) = &self.checkpoint_dir {
+            return checkpoint::write_file(f, self.fingerprint, dir, &name)
+                .map(Some)
+                .map_err(GpuError::Failed);
+        }
+        let bytes = checkpoint::encode(f, self.fingerprint).map_err(GpuError::Failed)?;
+        self.pending.push_back((name, bytes));
+        Ok(None)
+    }
+
+    /// Natively: each checkpoint is written into `dir` as it is encoded, where
+    /// `restore_file` finds it, instead of being held whole in memory until
+    /// `take_checkpoint` (a 5 cm tile's is tens of MiB).
+    pub fn write_checkpoints_into(&mut self, dir: std::path::PathBuf) {
+        self.checkpoint_dir = Some(dir);
     }
 
     /// The checkpoint of a tile finished (or skipped) since the last call, once

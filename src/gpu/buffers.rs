@@ -57,7 +57,8 @@ pub fn uniform(ctx: &GpuContext, label: &str, data: &[u8]) -> wgpu::Buffer {
 }
 
 /// A compute pipeline with an automatic layout from WGSL `parts`: made once per
-/// device, then the same one (`GpuContext`'s cache).
+/// device, then the same one (`GpuContext`'s cache, which natively each tile
+/// empties: `GpuContext::forget_pipelines`).
 pub fn pipeline(
     ctx: &GpuContext,
     label: &str,

@@ -253,6 +253,20 @@ impl GpuContext {
         self.pipelines.lock().ok()?.get(key).cloned()
     }
 
+    /// Drops the pipelines made so far: the next use of each makes it again.
+    ///
+    /// Natively a tiled run calls it as each tile starts. lavapipe keeps state per
+    /// pipeline that grows with the dispatches it has run (about 35 MiB per tile
+    /// of 24 m at 10 cm, 350 kB a step, on its queue thread) and frees it only with
+    /// the pipeline: pipelines kept for the whole run made resident memory grow
+    /// with the drive. Remaking them costs a few ms a tile natively; the page,
+    /// where SwiftShader takes seconds to compile them, keeps them.
+    pub fn forget_pipelines(&self) {
+        if let Ok(mut c) = self.pipelines.lock() {
+            c.clear();
+        }
+    }
+
     /// Keeps pipeline `p` for `key`.
     pub(crate) fn cache_pipeline(
         &self,

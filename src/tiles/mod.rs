@@ -740,6 +740,8 @@ impl TiledRun {
             self.park_poses();
             self.session = None;
             self.recorded = false;
+            #[cfg(not(target_arch = "wasm32"))]
+            self.ctx.forget_pipelines();
             match Session::build(b, self.cfg.clone(), self.ctx.clone(), Some(&tile)).await {
                 Ok(mut s) => {
                     if let Some(p) = self.poses.take() {

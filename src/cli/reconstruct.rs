@@ -605,13 +605,9 @@ fn write_streamed(
 /// checkpoint).
 pub(super) fn write_checkpoints(run: &mut TiledRun, dir: &std::path::Path) -> Result<(), String> {
     while let Some((name, bytes)) = run.take_checkpoint() {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
-        let part = dir.join(format!("{name}.part"));
-        std::fs::write(&part, &bytes)
-            .map_err(|e| format!("cannot write {}: {e}", part.display()))?;
-        let to = dir.join(&name);
-        std::fs::rename(&part, &to).map_err(|e| format!("cannot write {}: {e}", to.display()))?;
+        crate::tiles::checkpoint::write_whole(dir, &name, |w| {
+            std::io::Write::write_all(w, &bytes).map_err(|e| e.to_string())
+        })?;
     }
     Ok(())
 }

@@ -58,7 +58,7 @@ pub fn uniform(ctx: &GpuContext, label: &str, data: &[u8]) -> wgpu::Buffer {
 
 /// A compute pipeline with an automatic layout from WGSL `parts`: made once per
 /// device, then the same one (`GpuContext`'s cache, which natively each tile
-/// empties: `GpuContext::forget_pipelines`).
+/// empties: `GpuContext::start_tile`).
 pub fn pipeline(
     ctx: &GpuContext,
     label: &str,

@@ -253,15 +253,17 @@ impl GpuContext {
         self.pipelines.lock().ok()?.get(key).cloned()
     }
 
-    /// Drops the pipelines made so far: the next use of each makes it again.
+    /// A tiled run starts a tile: natively the pipelines made so far are dropped,
+    /// and the next use of each makes it again; in the browser they are kept.
     ///
-    /// Natively a tiled run calls it as each tile starts. lavapipe keeps state per
-    /// pipeline that grows with the dispatches it has run (about 35 MiB per tile
-    /// of 24 m at 10 cm, 350 kB a step, on its queue thread) and frees it only with
-    /// the pipeline: pipelines kept for the whole run made resident memory grow
-    /// with the drive. Remaking them costs a few ms a tile natively; the page,
-    /// where SwiftShader takes seconds to compile them, keeps them.
-    pub fn forget_pipelines(&self) {
+    /// lavapipe keeps state per pipeline that grows with the dispatches it has run
+    /// (about 35 MiB per tile of 24 m at 10 cm, 350 kB a step, on its queue
+    /// thread) and frees it only with the pipeline: pipelines kept for the whole
+    /// run made resident memory grow with the drive. Remaking them costs a few ms
+    /// a tile natively; the page, where SwiftShader takes seconds to compile them,
+    /// keeps them.
+    pub fn start_tile(&self) {
+        #[cfg(not(target_arch = "wasm32"))]
         if let Ok(mut c) = self.pipelines.lock() {
             c.clear();
         }

@@ -90,34 +90,37 @@ fn le<T: bytemuck::Pod>(v: &[T]) -> &[u8] {
 }
 
 /// The checkpoint file of `f` for a run of fingerprint `fingerprint`, in memory
-/// (the page, which has no disk; the buffer is sized once for the raw arrays).
+/// (the page, which has no disk).
 pub fn encode(f: &Finished, fingerprint: u64) -> Result<Vec<u8>, String> {
-    let raw = f.layers.as_ref().map_or(0, |l| {
-        4 * (l.bev.rgb.len() + l.bev.logits.len() + l.bev.elevation.len() + l.bev.alpha.len())
-            + 4 * (l.confidence.len() + l.density.len())
-    }) + f.model.len() * (4 * (3 + 3 + 2 + 1 + 4) + 4 * f.model.channels)
-        + 24 * f.centres.len();
-    let out = Cursor::new(Vec::with_capacity(raw + (1 << 16)));
-    Ok(encode_into(f, fingerprint, out)?.into_inner())
+    Ok(encode_into(f, fingerprint, Cursor::new(Vec::new()))?.into_inner())
 }
 
 /// Natively: writes the checkpoint of `f` into `dir/name` as it is encoded, with no
-/// copy of it in memory (`name.part`, then renamed: a run killed while writing
-/// leaves no half checkpoint). Returns the file's path.
+/// copy of it in memory. Returns the file's path.
 pub fn write_file(
     f: &Finished,
     fingerprint: u64,
     dir: &std::path::Path,
     name: &str,
 ) -> Result<std::path::PathBuf, String> {
+    write_whole(dir, name, |w| encode_into(f, fingerprint, w).map(drop))
+}
+
+/// Natively: a checkpoint file `dir/name` written by `fill`: to `name.part`, then
+/// renamed, so a run killed while writing leaves no half checkpoint. Returns the
+/// file's path; an error names the file.
+pub fn write_whole(
+    dir: &std::path::Path,
+    name: &str,
+    fill: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> Result<(), String>,
+) -> Result<std::path::PathBuf, String> {
     std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
     let part = dir.join(format!("{name}.part"));
     let cannot = |e: &dyn std::fmt::Display| format!("cannot write {}: {e}", part.display());
     let file = std::fs::File::create(&part).map_err(|e| cannot(&e))?;
-    encode_into(f, fingerprint, std::io::BufWriter::new(file))
-        .map_err(|e| cannot(&e))?
-        .into_inner()
-        .map_err(|e| cannot(&e))?;
+    let mut w = std::io::BufWriter::new(file);
+    fill(&mut w).map_err(|e| cannot(&e))?;
+    w.into_inner().map_err(|e| cannot(&e))?;
     let to = dir.join(name);
     std::fs::rename(&part, &to).map_err(|e| format!("cannot write {}: {e}", to.display()))?;
     Ok(to)

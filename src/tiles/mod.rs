@@ -740,8 +740,7 @@ impl TiledRun {
             self.park_poses();
             self.session = None;
             self.recorded = false;
-            #[cfg(not(target_arch = "wasm32"))]
-            self.ctx.forget_pipelines();
+            self.ctx.start_tile();
             match Session::build(b, self.cfg.clone(), self.ctx.clone(), Some(&tile)).await {
                 Ok(mut s) => {
                     if let Some(p) = self.poses.take() {

@@ -115,6 +115,7 @@ fn a_drive_too_long_for_whole_layers_streams_and_over_its_budget_is_bad_input() 
     assert_eq!(o.status.code(), Some(0), "{err}");
     assert!(err.contains("written block by block: map.rogsmap"), "{err}");
     let map = std::fs::read(out.join("map.rogsmap")).expect("map.rogsmap");
+    let embedded = embedded_report(&map);
     let summary = rogs::export::map_file::validate(map, &rogs::bundle::Limits::default())
         .unwrap_or_else(|e| panic!("the streamed map is invalid: {e}"));
     eprintln!("{summary:?}");
@@ -136,6 +137,10 @@ fn a_drive_too_long_for_whole_layers_streams_and_over_its_budget_is_bad_input() 
         serde_json::from_slice(&std::fs::read(out.join("report.json")).expect("report"))
             .expect("json");
     assert_eq!(report["map_layers"]["streamed"], true, "{report}");
+    // report.json's peak is read after the map and its layers were written, the
+    // embedded copy's before.
+    let peak = |r: &serde_json::Value| r["peak_host_bytes"].as_u64().expect("peak_host_bytes");
+    assert!(peak(&report) >= peak(&embedded), "{report} {embedded}");
     // Over a budget its blocks exceed too: bad input, with what they need.
     let o = run(&args(&["--map-memory-mib", "64"]));
     let err = String::from_utf8_lossy(&o.stderr);
@@ -362,4 +367,15 @@ fn a_tile_too_large_for_the_gpu_is_refused_before_any_work() {
     );
     assert!(!err.contains("step "), "no step ran: {err}");
     std::fs::remove_dir_all(out).ok();
+}
+
+/// The report.json that a map.rogsmap embeds.
+fn embedded_report(map: &[u8]) -> serde_json::Value {
+    use rogs::bundle::{Source, ZipSource};
+    let limits = rogs::bundle::Limits::default();
+    let zip = ZipSource::new(map.to_vec(), &limits).expect("map.rogsmap is a zip");
+    let bytes = zip
+        .read("report.json", &limits)
+        .expect("report.json in the map");
+    serde_json::from_slice(&bytes).expect("json")
 }

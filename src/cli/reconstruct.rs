@@ -498,9 +498,11 @@ pub(super) fn write_map(
         )
     })?;
     let mut files = crate::export::files(&o, &b.manifest)?;
-    let report = run.report(b, &o, name);
+    let mut report = run.report(b, &o, name);
+    let embedded = serde_json::to_vec_pretty(&report).map_err(|e| e.to_string())?;
+    let map = crate::export::map_file::write(&o, b, &embedded)?;
+    final_peak(&mut report);
     let report = serde_json::to_vec_pretty(&report).map_err(|e| e.to_string())?;
-    let map = crate::export::map_file::write(&o, b, &report)?;
     files.push(("report.json".into(), report));
     if let Some(p) = run.pose_refiner() {
         let json = serde_json::to_vec_pretty(&p.file(&b.manifest)).map_err(|e| e.to_string())?;
@@ -519,6 +521,15 @@ pub(super) fn write_map(
     }
     eprintln!("wrote {} files to {}", model + files.len(), out.display());
     Ok(())
+}
+
+/// report.json's `peak_host_bytes` read again once every output but the small files
+/// is made: the run's peak includes encoding map.rogsmap and the layers, which come
+/// after the report is first built (map.rogsmap embeds that first reading).
+fn final_peak(report: &mut serde_json::Value) {
+    if let Some(p) = crate::mem::peak_host_bytes() {
+        report["peak_host_bytes"] = p.into();
+    }
 }
 
 /// As `write_map`, for a map too large for whole layers (`TiledRun::streamed`): the
@@ -580,7 +591,9 @@ fn write_streamed(
     }
     let json = |v: &serde_json::Value| serde_json::to_vec_pretty(v).map_err(|e| e.to_string());
     let mut files = crate::export::side_files(&g, &b.manifest, done.range, run.has_truth());
-    files.push(("report.json".to_string(), json(&done.report)?));
+    let mut report = done.report;
+    final_peak(&mut report);
+    files.push(("report.json".to_string(), json(&report)?));
     let mut map = done.map;
     std::io::Write::flush(&mut map)
         .map_err(|e| format!("{}: {e}", out.join("map.rogsmap").display()))?;

@@ -159,7 +159,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
             l[q] += attrs[o + 3u + q] * w;
         }
     }
-    let gain = exp(view.exposure_a);
+    let gain = exp(view.exposure_a + view.frame_a);
     finish(x, y, Done(t.x, vec3<f32>(cr.x, cg.x, cb.x), depth.x, wsum.x, last_k.x), gain, &l, 0u);
     finish(x, y + 1u, Done(t.y, vec3<f32>(cr.y, cg.y, cb.y), depth.y, wsum.y, last_k.y), gain, &l, 1u);
     finish(x, y + 2u, Done(t.z, vec3<f32>(cr.z, cg.z, cb.z), depth.z, wsum.z, last_k.z), gain, &l, 2u);

@@ -162,7 +162,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
     let y = wg.y * TILE + 4u * lid.y;
     let stride = S_LOGITS + CH;
     let r = vec2<u32>(ranges[2u * tile], ranges[2u * tile + 1u]);
-    let gain = exp(view.exposure_a);
+    let gain = exp(view.exposure_a + view.frame_a);
     let pa = load_pixel(x, y, gain);
     let pb = load_pixel(x, y + 1u, gain);
     let pc = load_pixel(x, y + 2u, gain);

@@ -28,7 +28,10 @@ struct View {
     // 1: the map's view (`Compositing::Average`): the alpha-weighted mean of the
     // surfels a pixel meets, whatever their order; see rasterize.
     average: u32,
-    pad1: u32,
+    // The frame's log gain, added to `exposure_a`: a frame's own exposure on top of
+    // its camera's, which the optimiser copies into `exposure_a` (see
+    // render::gpu::forward_with). The gradient of `exposure_a` is unchanged by it.
+    frame_a: f32,
     pad2: u32,
 }
 

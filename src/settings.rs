@@ -109,6 +109,10 @@ pub struct Settings {
     /// lidar_colours`; default true).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub lidar_colours: Option<bool>,
+    /// A gain per frame on top of each camera's exposure (`TrainConfig::
+    /// frame_exposure`; default true).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frame_exposure: Option<bool>,
     /// Learning rates by name (`LearningRates::set`: "rgb", "logits", "opacity", …),
     /// over the defaults.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -217,6 +221,9 @@ impl Settings {
         c.train.lr.check()?;
         if let Some(v) = self.lidar_colours {
             c.train.lidar_colours = v;
+        }
+        if let Some(v) = self.frame_exposure {
+            c.train.frame_exposure = v;
         }
         if let Some(a) = self.adam.as_deref() {
             c.train.adam = crate::optim::AdamScope::parse(a)

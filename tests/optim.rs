@@ -15,16 +15,18 @@ use rogs::optim::check::{compare_pose_grad, compare_step};
 fn gpu_step_matches_the_oracles() {
     use rogs::optim::AdamScope;
     for mode in [AdamScope::Selective, AdamScope::Dense] {
-        // The last case weighs the RGB term robustly (a drive without labels' loss).
-        for (window, margin, overflows, robust_c) in [
-            (None, None, 0, 0.0),
-            (Some(3), None, 0, 0.0),
-            (None, Some(0.4), 1, 0.0),
-            (None, None, 0, 0.2),
+        // The fourth case weighs the RGB term robustly (a drive without labels' loss);
+        // the last renders the view with a frame gain on top of its camera's exposure.
+        for (window, margin, overflows, robust_c, gain) in [
+            (None, None, 0, 0.0, 0.0),
+            (Some(3), None, 0, 0.0, 0.0),
+            (None, Some(0.4), 1, 0.0, 0.0),
+            (None, None, 0, 0.2, 0.0),
+            (None, None, 0, 0.0, 0.3),
         ] {
             let ctx = GpuContext::new_blocking()
                 .unwrap_or_else(|e| panic!("GPU tests need an adapter: {e}"));
-            let d = pollster::block_on(compare_step(ctx, mode, window, margin, robust_c))
+            let d = pollster::block_on(compare_step(ctx, mode, window, margin, robust_c, gain))
                 .expect("gpu step");
             assert_eq!(d.pair_overflows, [0, overflows], "{d:#?}");
             assert_eq!(d.decayed > 0, mode != AdamScope::Dense, "{d:#?}");

@@ -128,6 +128,12 @@ pub struct SettingsArgs {
     /// ablation: the LiDAR's start is 3 dB better on `demo`, docs/QUALITY.md).
     #[arg(long)]
     no_lidar_colours: bool,
+    /// One exposure per camera only, without each frame's own gain on top (by
+    /// default a view's gain is measured at its first step, against the map so
+    /// far, because auto-exposure changes a real camera's brightness from frame to
+    /// frame; held-out views take their neighbours').
+    #[arg(long)]
+    no_frame_exposure: bool,
     /// Set a learning rate by name, e.g. `--lr rgb=4e-3` (repeatable): z_start,
     /// z_end, rotation, scale, opacity, rgb, rgb_on_lidar, logits, exposure.
     #[arg(long, value_name = "NAME=RATE", value_parser = parse_rate)]
@@ -280,6 +286,7 @@ impl SettingsArgs {
             adam: Some(a.adam.name().into()),
             robust_c: a.robust_c,
             lidar_colours: a.no_lidar_colours.then_some(false),
+            frame_exposure: a.no_frame_exposure.then_some(false),
             lr: a.lr.clone(),
         }
     }

@@ -95,18 +95,21 @@ fn reg_data(n: usize, z: &[f32], rng: &mut Rng) -> RegData {
 /// binds (`None`: as many as fit, one pass here); `pair_margin` (`None`: the default)
 /// sizes step 2's pair buffers from step 1's count (below 1 step 2 overflows them and
 /// runs again); `robust_c` weighs the RGB term robustly (`LossConfig::robust_c`, 0:
-/// plain L1).
+/// plain L1); `frame_gain`: the view's own log gain on top of its camera's exposure
+/// (`Session::frame_gain`), which the oracle renders as exposure a.
 pub async fn compare_step(
     ctx: GpuContext,
     mode: super::AdamScope,
     moment_window: Option<usize>,
     pair_margin: Option<f64>,
     robust_c: f32,
+    frame_gain: f32,
 ) -> Result<StepDifferences, GpuError> {
     let ch = 4;
     let (p0, mut cam) = test_scene(ch);
-    // The trainer's exposures start at zero on the GPU.
-    cam.exposure = [0.0, 0.0];
+    // The trainer's exposures start at zero on the GPU, so that the view's exposure
+    // is its frame gain alone.
+    cam.exposure = [frame_gain, 0.0];
     let n = p0.len();
     let mut rng = Rng::new(11);
     let z: Vec<f32> = p0.pos.iter().map(|q| q[2]).collect();

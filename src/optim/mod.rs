@@ -47,6 +47,9 @@ pub struct TrainConfig {
     pub pair_margin: f64,
     /// Which surfels' parameters a step updates (shaders/adam.wgsl).
     pub adam: AdamScope,
+    /// A gain per frame on top of the camera's exposure, measured at each view's
+    /// first step (`Session::frame_gain`); held-out views take their neighbours'.
+    pub frame_exposure: bool,
 }
 
 /// Which surfels' parameters an optimisation step updates.
@@ -101,6 +104,7 @@ impl Default for TrainConfig {
             moment_window: None,
             pair_margin: 1.25,
             adam: AdamScope::Dense,
+            frame_exposure: true,
         }
     }
 }

@@ -249,6 +249,8 @@ pub struct GpuForward {
 
 /// Byte offset of (exposure_a, exposure_b) in the `View` uniform.
 const VIEW_EXPOSURE_OFFSET: u64 = 4 * 23;
+/// Word of `frame_a` (the frame's log gain) in the `View` uniform.
+const VIEW_FRAME_A_WORD: usize = 30;
 
 /// The `View` uniform of shaders/view.wgsl.
 fn view_bytes(
@@ -366,7 +368,8 @@ impl GpuRasterizer {
 
     /// The forward pass; with `exposure` = (buffer, byte offset), the view's exposure
     /// (a, b) is copied on the GPU from there instead of taken from `cam`, so that an
-    /// optimiser can keep it on the GPU. With `mask` (a packed training target,
+    /// optimiser can keep it on the GPU, and `cam.exposure[0]` is then the frame's own
+    /// log gain on top of it (`View::frame_a`; `cam.exposure[1]` is unused). With `mask` (a packed training target,
     /// `loss::targets`), only the pixels inside the loss mask are composited; the
     /// others read as empty (training needs nothing else from them). With `capacity`,
     /// the pair buffers hold that many pairs and the count is not read back, so the
@@ -406,7 +409,11 @@ impl GpuRasterizer {
             )));
         }
         let cand_buf = init_storage(ctx, "candidates", bytemuck::cast_slice(&cand));
-        let bytes = view_bytes(cam, cull, n, p.channels, mask.is_some(), comp);
+        let mut bytes = view_bytes(cam, cull, n, p.channels, mask.is_some(), comp);
+        if exposure.is_some() {
+            let at = 4 * VIEW_FRAME_A_WORD;
+            bytes[at..at + 4].copy_from_slice(&cam.exposure[0].to_le_bytes());
+        }
         let view = uniform(ctx, "view", &bytes);
         let (gx, gy) = ctx.dispatch_2d(n.div_ceil(256));
         let grid = uniform(ctx, "grid", bytemuck::cast_slice(&[gx * 256, 0u32, 0, 0]));

@@ -3,11 +3,13 @@
 // www/ (build it first: bash scripts/build-wasm.sh) and
 // prints the steps, seconds per step and total time as JSON. With `steps`, it stops
 // the run after that many steps (large bundles: time per step without a whole epoch).
-// With `--segment MODEL.onnx`, masks are computed in the page first ("Compute masks
+// With `--no-frame-exposure`, the page's "A gain per frame" is unticked. With `--segment MODEL.onnx`, masks are computed in the page first ("Compute masks
 // with a model…", TwinLiteNet's class map) and their time is printed as well.
 import { openBench } from './bench-browser.mjs';
 
 const args = process.argv.slice(2);
+const noGains = args.indexOf('--no-frame-exposure');
+if (noGains >= 0) args.splice(noGains, 1);
 const seg = args.indexOf('--segment');
 const model = seg >= 0 ? args.splice(seg, 2)[1] : null;
 const [bundle, resolution = '0.1', maxSteps] = args;
@@ -29,6 +31,7 @@ try {
     if (!segment.seconds) process.exit(1);
   }
   await page.selectOption('#set-resolution', resolution);
+  if (noGains >= 0) await page.setChecked('#set-frame-exposure', false);
   const t0 = Date.now();
   await page.click('#run');
   if (maxSteps) {

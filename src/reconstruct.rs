@@ -1050,7 +1050,9 @@ impl Outcome {
 }
 
 /// Views and the range and RMS of their gains as factors (e^a), when measured.
-fn frame_gain_summary(g: &std::collections::BTreeMap<(usize, usize), f32>) -> serde_json::Value {
+pub fn frame_gain_summary(
+    g: &std::collections::BTreeMap<(usize, usize), f32>,
+) -> serde_json::Value {
     if g.is_empty() {
         return serde_json::Value::Null;
     }
@@ -1063,6 +1065,35 @@ fn frame_gain_summary(g: &std::collections::BTreeMap<(usize, usize), f32>) -> se
         "min": lo.exp(),
         "max": hi.exp(),
         "log_rms": rms,
+    })
+}
+
+/// Several tiles' `frame_gain_summary` as one (null when none measured any).
+pub fn merge_frame_gains<'a>(
+    parts: impl Iterator<Item = &'a serde_json::Value>,
+) -> serde_json::Value {
+    let (mut views, mut sq, mut lo, mut hi) = (0u64, 0.0f64, f64::INFINITY, 0.0f64);
+    for p in parts {
+        let (Some(n), Some(r), Some(a), Some(b)) = (
+            p["views"].as_u64(),
+            p["log_rms"].as_f64(),
+            p["min"].as_f64(),
+            p["max"].as_f64(),
+        ) else {
+            continue;
+        };
+        views += n;
+        sq += n as f64 * r * r;
+        (lo, hi) = (lo.min(a), hi.max(b));
+    }
+    if views == 0 {
+        return serde_json::Value::Null;
+    }
+    serde_json::json!({
+        "views": views,
+        "min": lo,
+        "max": hi,
+        "log_rms": (sq / views as f64).sqrt(),
     })
 }
 

@@ -313,6 +313,7 @@ mod tests {
         let s: Settings = serde_json::from_str(
             r#"{"resolution": 0.2, "seed": 5, "max_steps": 12, "traj_loss": false,
                 "lidar_gate": 0.7, "lr_z_start": 0.002, "baseline": "ipm", "tile_m": 24,
+                "frame_exposure": false,
                 "lr": [["rgb", 0.004], ["logits", 0.05]]}"#,
         )
         .expect("settings");
@@ -324,11 +325,13 @@ mod tests {
         assert_eq!(c.train.lr.z_start, 0.002);
         assert_eq!((c.train.lr.rgb, c.train.lr.logits), (0.004, 0.05));
         assert!(c.baseline_ipm);
+        assert!(!c.train.frame_exposure);
         let t = s.tiling().expect("tiling").expect("tiled");
         assert_eq!((t.size_m, t.overlap_m), (24.0, DEFAULT_OVERLAP_M));
         // Defaults: the front end's grid, the bundle's corridor when it has one.
         let c = Settings::default().config(&m, CLI).expect("config");
         assert_eq!(c.prepare.grid.resolution, 0.05);
+        assert!(c.train.frame_exposure, "frame gains by default");
         let want = m.corridor_half_width_m.unwrap_or(CLI.half_width);
         assert_eq!(c.prepare.grid.half_width, want);
         for (json, says) in [

@@ -556,13 +556,8 @@ fn a_frame_brighter_than_its_neighbours_gets_its_own_gain() {
     let mut out = generate(&c, &|_, _, _| {}).expect("synth");
     let cam0 = out.manifest.cameras[0].name.clone();
     let bright = |k: usize| k % 3 == 1;
-    for (k, f) in out
-        .manifest
-        .frames
-        .iter()
-        .enumerate()
-        .filter(|(k, _)| bright(*k))
-    {
+    let frames = out.manifest.frames.iter().enumerate();
+    for (_, f) in frames.filter(|(k, _)| bright(*k)) {
         let v = f.views.iter().find(|v| v.camera == cam0).expect("camera 0");
         let file = out
             .files

@@ -56,6 +56,7 @@ function settings() {
     ...(Number($('set-tile').value) > 0 ? { tile_m: Number($('set-tile').value) } : {}),
     tile_overlap_m: Number($('set-tile-overlap').value) || 0,
     traj_loss: $('set-traj').checked,
+    ...($('set-frame-exposure').checked ? {} : { frame_exposure: false }),
     ...($('set-ipm').checked ? { baseline: 'ipm' } : {}),
     ...(Number($('set-holdout').value) > 0 ? { holdout_every: Number($('set-holdout').value) } : {}),
     ...optionalNumber('lr_z_start', 'set-lr-z-start'),

@@ -368,6 +368,12 @@ pub struct TileReport {
     /// Restored from a checkpoint of an earlier run (`--resume`), not trained here.
     #[serde(default)]
     pub restored: bool,
+    /// The views' own gains (report.json's `frame_gains`) and the time spent
+    /// measuring them.
+    #[serde(default)]
+    pub frame_gains: serde_json::Value,
+    #[serde(default)]
+    pub exposure_ms: f64,
     /// The process's resident memory as the tile was added to the map (natively).
     #[serde(default)]
     pub host_bytes: Option<u64>,
@@ -858,6 +864,8 @@ impl TiledRun {
             peak_gpu_bytes: self.peak_gpu_bytes,
             stopped: s.stopped.clone(),
             restored: false,
+            frame_gains: crate::reconstruct::frame_gain_summary(&s.frame_gains),
+            exposure_ms: s.timings.exposure_ms,
             host_bytes: None,
         };
         let mut file = None;
@@ -1306,6 +1314,9 @@ impl TiledRun {
             r["timings"]["train_ms"] = (train_s * 1e3).into();
             r["timings"]["prepare_ms"] = rs.iter().map(|t| t.prepare_ms).sum::<f64>().into();
             r["timings"]["bev_ms"] = rs.iter().map(|t| t.bev_ms).sum::<f64>().into();
+            r["timings"]["exposure_ms"] = rs.iter().map(|t| t.exposure_ms).sum::<f64>().into();
+            r["frame_gains"] =
+                crate::reconstruct::merge_frame_gains(rs.iter().map(|t| &t.frame_gains));
             r["seconds_per_step"] =
                 serde_json::to_value((steps > 0).then(|| train_s / steps as f64))
                     .unwrap_or_default();

@@ -252,6 +252,7 @@ test('every setting of rogs reconstruct is in the page and reaches the run; a ba
   await page.fill('#set-seed', '5');
   await page.fill('#set-holdout', '4');
   await page.uncheck('#set-traj');
+  await page.uncheck('#set-frame-exposure');
   await page.selectOption('#set-adam', 'selective');
   await page.check('#set-refine-poses');
   await page.check('#set-pose-rig');
@@ -270,6 +271,8 @@ test('every setting of rogs reconstruct is in the page and reaches the run; a ba
   assert.ok(r.holdout_views > 0, 'frames were held out');
   assert.equal(t.loss.traj, 0);
   assert.equal(t.adam, 'selective');
+  assert.equal(t.frame_exposure, false);
+  assert.equal(r.frame_gains, null, 'no frame gains were measured');
   assert.ok(r.pose_refinement && r.pose_refinement.rig, 'camera mountings were refined: ' + JSON.stringify(r.pose_refinement));
   assert.ok(Math.abs(t.loss.lidar_gate_m - 0.7) < 1e-6 && Math.abs(t.loss.lidar_band_m - 0.3) < 1e-6, JSON.stringify(t.loss));
   assert.ok(Math.abs(t.lr.z_start - 0.002) < 1e-9 && Math.abs(t.lr.z_end - 0.00002) < 1e-9, JSON.stringify(t.lr));

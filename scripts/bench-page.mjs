@@ -31,7 +31,10 @@ try {
     if (!segment.seconds) process.exit(1);
   }
   await page.selectOption('#set-resolution', resolution);
-  if (noGains >= 0) await page.setChecked('#set-frame-exposure', false);
+  if (noGains >= 0) {
+    await page.evaluate(() => { document.getElementById('advanced').open = true; });
+    await page.setChecked('#set-frame-exposure', false);
+  }
   const t0 = Date.now();
   await page.click('#run');
   if (maxSteps) {

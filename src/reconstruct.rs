@@ -588,7 +588,7 @@ impl Session {
         let sf = s as f32;
         (low.fx, low.fy, low.cx, low.cy) = (cam.fx / sf, cam.fy / sf, cam.cx / sf, cam.cy / sf);
         (low.width, low.height) = ((cam.width / s).max(1), (cam.height / s).max(1));
-        let at = |k: u32, n: u32| (k * s + s / 2).min(n - 1) as usize;
+        let at = |k: u32, n: u32| (k * s + s / 2).min(n.saturating_sub(1)) as usize;
         let target: Vec<u32> = (0..low.height)
             .flat_map(|y| {
                 (0..low.width)

@@ -249,10 +249,9 @@ pub struct GpuForward {
 
 /// Byte offset of (exposure_a, exposure_b) in the `View` uniform.
 const VIEW_EXPOSURE_OFFSET: u64 = 4 * 23;
-/// Word of `frame_a` (the frame's log gain) in the `View` uniform.
-const VIEW_FRAME_A_WORD: usize = 30;
 
-/// The `View` uniform of shaders/view.wgsl.
+/// The `View` uniform of shaders/view.wgsl; `frame_a`: the frame's log gain on top
+/// of the exposure (a, b).
 fn view_bytes(
     cam: &ViewCamera,
     cull: &CullConfig,
@@ -260,6 +259,7 @@ fn view_bytes(
     channels: u32,
     masked: bool,
     comp: Compositing,
+    frame_a: f32,
 ) -> Vec<u8> {
     let mut f: Vec<u32> = Vec::with_capacity(32);
     for row in &cam.world_to_cam {
@@ -270,7 +270,7 @@ fn view_bytes(
     f.extend([cull.near, cull.far, cull.half_width, cam.exposure[0]].map(f32::to_bits));
     f.extend([cam.exposure[1].to_bits(), tile_bits(cam), channels, count]);
     let average = comp == Compositing::Average;
-    f.extend([masked as u32, average as u32, 0, 0]);
+    f.extend([masked as u32, average as u32, frame_a.to_bits(), 0]);
     bytemuck::cast_slice(&f).to_vec()
 }
 
@@ -368,12 +368,13 @@ impl GpuRasterizer {
 
     /// The forward pass; with `exposure` = (buffer, byte offset), the view's exposure
     /// (a, b) is copied on the GPU from there instead of taken from `cam`, so that an
-    /// optimiser can keep it on the GPU, and `cam.exposure[0]` is then the frame's own
-    /// log gain on top of it (`View::frame_a`; `cam.exposure[1]` is unused). With `mask` (a packed training target,
-    /// `loss::targets`), only the pixels inside the loss mask are composited; the
-    /// others read as empty (training needs nothing else from them). With `capacity`,
-    /// the pair buffers hold that many pairs and the count is not read back, so the
-    /// whole pass is encoded without waiting for the GPU: the caller compares `total`
+    /// optimiser can keep it on the GPU, and `cam.exposure[0]` is then the frame's
+    /// own log gain on top of it (`View::frame_a`; `cam.exposure[1]` is unused). With
+    /// `mask` (a packed training target, `loss::targets`), only the pixels inside the
+    /// loss mask are composited; the others read as empty (training needs nothing
+    /// else from them). With `capacity`, the pair buffers hold that many pairs and
+    /// the count is not read back, so the whole pass is encoded without waiting for
+    /// the GPU: the caller compares `total`
     /// with the capacity afterwards (the kernels clamp to it, so an overflow gives a
     /// wrong image, never an out-of-bounds access). `comp` says how a pixel combines
     /// its surfels (`Compositing`; the backward pass follows `Occlusion` only). `fp`:
@@ -409,11 +410,13 @@ impl GpuRasterizer {
             )));
         }
         let cand_buf = init_storage(ctx, "candidates", bytemuck::cast_slice(&cand));
-        let mut bytes = view_bytes(cam, cull, n, p.channels, mask.is_some(), comp);
-        if exposure.is_some() {
-            let at = 4 * VIEW_FRAME_A_WORD;
-            bytes[at..at + 4].copy_from_slice(&cam.exposure[0].to_le_bytes());
-        }
+        // With the exposure from a buffer, `cam.exposure[0]` is the frame's gain.
+        let frame_a = if exposure.is_some() {
+            cam.exposure[0]
+        } else {
+            0.0
+        };
+        let bytes = view_bytes(cam, cull, n, p.channels, mask.is_some(), comp, frame_a);
         let view = uniform(ctx, "view", &bytes);
         let (gx, gy) = ctx.dispatch_2d(n.div_ceil(256));
         let grid = uniform(ctx, "grid", bytemuck::cast_slice(&[gx * 256, 0u32, 0, 0]));

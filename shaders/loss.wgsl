@@ -20,9 +20,15 @@
 //! (src/optim/train.rs). Checking here, on the GPU, lets the
 //! whole step run without waiting for the count.
 //!
+//! The colour is taken before exposure (`px_out`'s colour slots 7–9) and exposed here
+//! with the view's (a, b) and frame gain: the step may have measured the frame's gain
+//! after the forward pass (frame_gain.wgsl, which writes `view.frame_a`), and the loss
+//! and `rasterize_backward` then both see the view at it.
+//!
 //! Oracle: src/loss/photometric.rs.
 
-// `LossParams` (the uniform block) is generated from src/optim/train.rs and prepended.
+// `LossParams` (the uniform block) is generated from src/optim/train.rs and prepended,
+// after view.wgsl (`View`, `PIX_STRIDE`, `GRAD_STRIDE`).
 
 @group(0) @binding(0) var<uniform> lp: LossParams;
 @group(0) @binding(1) var<storage, read> px_out: array<f32>;
@@ -35,14 +41,13 @@
 @group(0) @binding(7) var<storage, read_write> status: array<u32>;
 // The forward pass's pair count (scan.wgsl), before any clamping to the capacity.
 @group(0) @binding(8) var<storage, read> total: array<u32>;
-
-const PIX_STRIDE: u32 = 10u;
-const GRAD_STRIDE: u32 = 5u;
+@group(0) @binding(9) var<uniform> view: View;
 
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let i = gid.x + gid.y * lp.row;
     let ch = lp.channels;
+    let gain = exp(view.exposure_a + view.frame_a);
     var l = vec2<f32>(0.0);
     if i < lp.width * lp.height {
         let o = PIX_STRIDE * i;
@@ -57,7 +62,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         let cls = t >> 24u;
         if cls != 255u && px_out[o + 4u] >= lp.min_alpha {
             let tc = vec3<f32>(f32(t & 255u), f32((t >> 8u) & 255u), f32((t >> 16u) & 255u)) / 255.0;
-            let d = vec3<f32>(px_out[o], px_out[o + 1u], px_out[o + 2u]) - tc;
+            let raw = vec3<f32>(px_out[o + 7u], px_out[o + 8u], px_out[o + 9u]);
+            let d = gain * raw + view.exposure_b - tc;
             // Robust weighting (drives without labels, where cars and people are in
             // the mask): a Cauchy weight 1 / (1 + (r/c)²) of the pixel's mean
             // residual r, held constant in the gradient (one IRLS step per step).

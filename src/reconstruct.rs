@@ -20,7 +20,7 @@ use crate::optim::train::{read_params, StepLoss, TrainError, Trainer};
 use crate::optim::{epoch_order, is_holdout, scene_extent, split_views, TrainConfig, ViewRef};
 use crate::render::from_bundle::{local_origin, params, view_camera};
 use crate::render::gpu::GpuRasterizer;
-use crate::render::{Params, ViewCamera};
+use crate::render::Params;
 use crate::tiles::tile::Tile;
 use serde::Serialize;
 use thiserror::Error;
@@ -281,8 +281,6 @@ pub struct Timings {
     pub train_ms: f64,
     /// Of `train_ms`: reading, decoding and packing the steps' target images.
     pub target_ms: f64,
-    /// Of `train_ms`: measuring each training view's gain at its first step.
-    pub exposure_ms: f64,
     pub bev_ms: f64,
     pub eval_ms: f64,
 }
@@ -324,7 +322,7 @@ pub struct Session {
     /// from tile to tile, so that a frame seen by two tiles has one correction).
     pub poses: Option<PoseRefiner>,
     /// Each training view's own log gain on top of its camera's exposure, by
-    /// (camera, frame), measured at its first step (`frame_gain`).
+    /// (camera, frame), measured in its first step (`optim::gain`).
     pub frame_gains: std::collections::BTreeMap<(usize, usize), f32>,
 }
 
@@ -564,81 +562,6 @@ impl Session {
         ))
     }
 
-    /// The view's own log gain on top of its camera's exposure: ln(Σ target / Σ render)
-    /// over the loss mask's pixels that the model covers, rendered with the camera's
-    /// exposure, measured at the view's first step and kept (auto-exposure changes a
-    /// real camera's brightness from frame to frame, which one exposure per camera
-    /// would bake into the map's colours). A ratio of sums, not a least-squares fit:
-    /// a fit of the target on a blurred render shrinks the gain toward the mean.
-    async fn frame_gain(
-        &mut self,
-        cam: &ViewCamera,
-        v: &ViewRef,
-        target: &[u32],
-    ) -> Result<f32, ReconstructError> {
-        if let Some(&a) = self.frame_gains.get(&(v.camera, v.frame)) {
-            return Ok(a);
-        }
-        let t0 = Instant::now();
-        let t = &self.trainer;
-        // A mean needs no detail: the view at 1/s of its resolution, with at least
-        // GAIN_PIXELS pixels, its target sampled at the low-resolution pixels' centres.
-        let s = (((cam.width * cam.height) as f64 / GAIN_PIXELS).sqrt() as u32).max(1);
-        let mut low = *cam;
-        let sf = s as f32;
-        (low.fx, low.fy, low.cx, low.cy) = (cam.fx / sf, cam.fy / sf, cam.cx / sf, cam.cy / sf);
-        (low.width, low.height) = ((cam.width / s).max(1), (cam.height / s).max(1));
-        let at = |k: u32, n: u32| (k * s + s / 2).min(n.saturating_sub(1)) as usize;
-        let target: Vec<u32> = (0..low.height)
-            .flat_map(|y| {
-                (0..low.width)
-                    .map(move |x| at(y, cam.height) * cam.width as usize + at(x, cam.width))
-            })
-            .map(|i| target.get(i).copied().unwrap_or(targets::MASKED << 24))
-            .collect();
-        // Only the loss mask's pixels are composited, as in a step.
-        let mask =
-            crate::gpu::buffers::init_storage(&t.ctx, "target", bytemuck::cast_slice(&target));
-        let f = t
-            .raster
-            .forward_with(
-                &t.ctx,
-                &t.params,
-                &low,
-                &self.cfg.train.cull,
-                Some((&t.exposure, 8 * v.camera as u64)),
-                Some(&mask),
-                None,
-                crate::render::Compositing::Occlusion,
-                None,
-            )
-            .await?;
-        let img = GpuRasterizer::read_image(&t.ctx, &f).await?;
-        let min_alpha = self.cfg.train.loss.min_alpha;
-        let (mut st, mut sr, mut n) = (0.0f64, 0.0f64, 0usize);
-        for (i, &tp) in target.iter().enumerate() {
-            if tp >> 24 == targets::MASKED || img.alpha[i] < min_alpha {
-                continue;
-            }
-            for c in 0..3 {
-                st += ((tp >> (8 * c)) & 255) as f64 / 255.0;
-                sr += img.rgb[3 * i + c] as f64;
-            }
-            n += 1;
-        }
-        // Too few pixels or a dark render say nothing about the frame's exposure.
-        let a = if n >= MIN_GAIN_PIXELS && sr > 1e-3 * n as f64 {
-            (st / sr)
-                .ln()
-                .clamp(-MAX_FRAME_LOG_GAIN, MAX_FRAME_LOG_GAIN) as f32
-        } else {
-            0.0
-        };
-        self.frame_gains.insert((v.camera, v.frame), a);
-        self.timings.exposure_ms += t0.elapsed().as_secs_f64() * 1e3;
-        Ok(a)
-    }
-
     /// A held-out view's log gain: the mean of its camera's nearest trained frames'
     /// before and after it (auto-exposure drifts slowly), 0 without any.
     pub fn holdout_gain(&self, v: &ViewRef) -> f32 {
@@ -666,8 +589,13 @@ impl Session {
         self.timings.target_ms += t.elapsed().as_secs_f64() * 1e3;
         let mut cam = view_camera(&b.manifest, v.frame, v.view, self.origin, [0.0, 0.0])
             .ok_or(ReconstructError::NoViews)?;
+        // A view's own gain on top of its camera's exposure: measured in its first
+        // step (rendered with gain 0) and kept for its later ones (`optim::gain`).
+        let key = (v.camera, v.frame);
+        let known = self.frame_gains.get(&key).copied();
+        let measure_gain = self.cfg.train.frame_exposure && known.is_none();
         if self.cfg.train.frame_exposure {
-            cam.exposure[0] = self.frame_gain(&cam, &v, &target).await?;
+            cam.exposure[0] = known.unwrap_or(0.0);
         }
         // With refinement: the view from the frame's corrected pose, and from the
         // start step on, the gradient about the corrected vehicle position.
@@ -687,17 +615,20 @@ impl Session {
         }
         let r = self
             .trainer
-            .step_with_pose(&cam, v.camera, &target, count, pose_centre)
+            .step_with(&cam, v.camera, &target, count, pose_centre, measure_gain)
             .await;
         self.timings.train_ms += t.elapsed().as_secs_f64() * 1e3;
         match r {
-            Ok((l, pose)) => {
-                if let (Some(r), Some(g)) = (&mut self.poses, pose) {
+            Ok(out) => {
+                if let (Some(r), Some(g)) = (&mut self.poses, out.pose) {
                     r.update(v.frame, g, progress);
                     r.update_rig(v.camera, g, x, progress);
                 }
-                self.losses.push(l);
-                Ok(Some(l))
+                if let Some(g) = out.gain {
+                    self.frame_gains.insert(key, g.log_gain);
+                }
+                self.losses.push(out.loss);
+                Ok(Some(out.loss))
             }
             Err(e) => {
                 self.stopped = Some(e.to_string());
@@ -860,14 +791,6 @@ impl Session {
         Ok(())
     }
 }
-
-/// Fewest loss-mask pixels a view's gain is measured over.
-const MIN_GAIN_PIXELS: usize = 64;
-/// A view's gain is measured on at least this many pixels (fewer, subsampled, are
-/// cheaper; on `demo`'s 192×108 views every pixel was needed, docs/QUALITY.md).
-const GAIN_PIXELS: f64 = 16384.0;
-/// A frame's gain stays within e^±1 of its camera's.
-const MAX_FRAME_LOG_GAIN: f64 = 1.0;
 
 /// Squared errors of held-out views summed over one or more sessions (tiles).
 #[derive(Clone, Debug, Default)]

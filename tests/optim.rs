@@ -16,13 +16,15 @@ fn gpu_step_matches_the_oracles() {
     use rogs::optim::AdamScope;
     for mode in [AdamScope::Selective, AdamScope::Dense] {
         // The fourth case weighs the RGB term robustly (a drive without labels' loss);
-        // the last renders the view with a frame gain on top of its camera's exposure.
+        // the fifth renders the view with a frame gain on top of its camera's exposure;
+        // in the last, step 1 measures the view's gain from its own forward pass.
         for (window, margin, overflows, robust_c, gain) in [
-            (None, None, 0, 0.0, 0.0),
-            (Some(3), None, 0, 0.0, 0.0),
-            (None, Some(0.4), 1, 0.0, 0.0),
-            (None, None, 0, 0.2, 0.0),
-            (None, None, 0, 0.0, 0.3),
+            (None, None, 0, 0.0, Some(0.0)),
+            (Some(3), None, 0, 0.0, Some(0.0)),
+            (None, Some(0.4), 1, 0.0, Some(0.0)),
+            (None, None, 0, 0.2, Some(0.0)),
+            (None, None, 0, 0.0, Some(0.3)),
+            (None, Some(0.4), 1, 0.0, None),
         ] {
             let ctx = GpuContext::new_blocking()
                 .unwrap_or_else(|e| panic!("GPU tests need an adapter: {e}"));
@@ -30,6 +32,7 @@ fn gpu_step_matches_the_oracles() {
                 .expect("gpu step");
             assert_eq!(d.pair_overflows, [0, overflows], "{d:#?}");
             assert_eq!(d.decayed > 0, mode != AdamScope::Dense, "{d:#?}");
+            assert_eq!(d.gain.is_some(), gain.is_none(), "{d:#?}");
             check_step(d);
         }
     }
@@ -75,6 +78,20 @@ fn check_step(d: rogs::optim::check::StepDifferences) {
     assert_eq!(d.applied, [true; 4], "every update is finite");
     assert!(d.params.iter().all(|&p| p < 1e-5), "Adam: {:?}", d.params);
     assert!(d.exposure < 1e-6, "exposure Adam differs by {}", d.exposure);
+    check_gain(d.gain);
+}
+
+/// A gain measured in the step (`frame_gain.wgsl`) against its oracle: the target
+/// is about half as bright as the render, so the gain is far from 0 and unclamped.
+pub fn check_gain(gain: Option<(f32, f32, u32)>) {
+    if let Some((gpu, cpu, pixels)) = gain {
+        assert!(pixels >= 64, "the gain counted {pixels} pixels");
+        assert!(
+            cpu < -0.2 && cpu > -0.99,
+            "the test's gain should be well inside (-1, 0): {cpu}"
+        );
+        assert!((gpu - cpu).abs() < 1e-4, "gain: GPU {gpu} vs CPU {cpu}");
+    }
 }
 
 #[test]

@@ -184,7 +184,6 @@ fn a_tiled_map_matches_the_untiled_one_without_seams() {
         .filter_map(|t| t.frame_gains["views"].as_u64())
         .sum();
     assert!(per_tile > 0 && report["frame_gains"]["views"].as_u64() == Some(per_tile));
-    assert!(report["timings"]["exposure_ms"].as_f64().unwrap_or(0.0) > 0.0);
     assert!(report["peak_gpu_bytes"].as_u64().unwrap_or(0) > 0);
     assert!(report["peak_host_bytes"].as_u64().unwrap_or(0) > 0);
     assert!(report["peak_host_training_bytes"].as_u64().unwrap_or(0) > 0);

@@ -121,17 +121,18 @@ async fn optimisation_step_matches_the_oracles_in_the_browser() {
     // In 3 windows of moments (blocks of 256 surfels, the last partial): the model is
     // small, so one would do, but a large one takes this path; the page's full runs
     // take the single-window one. Step 2's pair buffers are too small, so it overflows
-    // them once and runs again. Dense Adam (the default) and selective; the view has
-    // a frame gain on top of its camera's exposure.
-    for mode in [
-        rogs::optim::AdamScope::Dense,
-        rogs::optim::AdamScope::Selective,
+    // them once and runs again. Dense Adam (the default), its view with a frame gain
+    // on top of its camera's exposure, and selective, whose step 1 measures the view's
+    // gain from its own forward pass.
+    for (mode, gain) in [
+        (rogs::optim::AdamScope::Dense, Some(-0.2)),
+        (rogs::optim::AdamScope::Selective, None),
     ] {
         let ctx = match GpuContext::new().await {
             Ok(c) => c,
             Err(e) => panic!("WebGPU adapter required: {e}"),
         };
-        let d = rogs::optim::check::compare_step(ctx, mode, Some(3), Some(0.4), 0.2, -0.2)
+        let d = rogs::optim::check::compare_step(ctx, mode, Some(3), Some(0.4), 0.2, gain)
             .await
             .expect("gpu step");
         assert_eq!(d.pair_overflows, [0, 1]);
@@ -156,6 +157,14 @@ async fn optimisation_step_matches_the_oracles_in_the_browser() {
             d.params
         );
         assert!(d.exposure < 1e-6);
+        assert_eq!(d.gain.is_some(), gain.is_none());
+        if let Some((gpu, cpu, pixels)) = d.gain {
+            assert!(
+                pixels >= 64 && cpu < -0.2 && cpu > -0.99,
+                "{gpu} {cpu} {pixels}"
+            );
+            assert!((gpu - cpu).abs() < 1e-4, "gain: GPU {gpu} vs CPU {cpu}");
+        }
     }
 }
 

@@ -2,6 +2,7 @@
 
 use crate::bundle::{Bundle, Limits};
 use crate::init::prepare::{prepare, PrepareConfig};
+use crate::optim::bench::StepBench;
 use crate::render::bench::median;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -67,6 +68,10 @@ pub enum Bench {
         /// Which surfels a step updates (to compare the two).
         #[arg(long, value_enum, default_value = "dense")]
         adam: super::reconstruct::AdamMode,
+        /// One exposure per camera instead of a gain per frame too (as `rogs
+        /// reconstruct --no-frame-exposure`; to measure what measuring the gains costs).
+        #[arg(long)]
+        no_frame_exposure: bool,
     },
     /// Grid, initialisation and refinement of a bundle: time per stage, surfel
     /// counts and bytes per surfel (median of the runs).
@@ -111,14 +116,18 @@ pub fn run(b: Bench) -> Result<ExitCode, String> {
             no_subgroup_reduction,
             moment_window,
             adam,
+            no_frame_exposure,
         } => super::bench_step::run(
             &bundle,
-            steps,
-            resolution,
-            half_width,
+            StepBench {
+                steps,
+                resolution,
+                half_width,
+                moment_window,
+                adam: adam.scope(),
+                frame_exposure: !no_frame_exposure,
+            },
             no_subgroup_reduction,
-            moment_window,
-            adam,
         ),
         Bench::Init {
             bundle,

@@ -8,26 +8,11 @@ use std::path::Path;
 use std::process::ExitCode;
 use std::time::Instant;
 
-pub fn run(
-    bundle: &Path,
-    steps: usize,
-    resolution: f64,
-    half_width: f64,
-    no_subgroup_reduction: bool,
-    moment_window: Option<usize>,
-    adam: super::reconstruct::AdamMode,
-) -> Result<ExitCode, String> {
+pub fn run(bundle: &Path, o: StepBench, no_subgroup_reduction: bool) -> Result<ExitCode, String> {
     let mut b =
         Bundle::open(bundle, Limits::default(), &mut |_, _| {}).map_err(|e| e.to_string())?;
     let mut ctx = GpuContext::new_blocking().map_err(|e| e.to_string())?;
     ctx.report.subgroups &= !no_subgroup_reduction;
-    let o = StepBench {
-        steps,
-        resolution,
-        half_width,
-        moment_window,
-        adam: adam.scope(),
-    };
     let t0 = Instant::now();
     let now = || t0.elapsed().as_secs_f64();
     let name = bundle.display().to_string();

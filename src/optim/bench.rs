@@ -25,6 +25,8 @@ pub struct StepBench {
     pub half_width: f64,
     pub moment_window: Option<usize>,
     pub adam: AdamScope,
+    /// A gain per frame (`TrainConfig::frame_exposure`).
+    pub frame_exposure: bool,
 }
 
 /// Runs the benchmark on `b` (named `name` in the figures) with `ctx`; the figures as
@@ -41,6 +43,7 @@ pub async fn step(
     cfg.prepare.grid.half_width = o.half_width;
     cfg.train.moment_window = o.moment_window;
     cfg.train.adam = o.adam;
+    cfg.train.frame_exposure = o.frame_exposure;
     cfg.train.max_steps = Some(o.steps.max(1) + 1);
     let subgroups = ctx.report.subgroups;
     let mut s = Session::new(b, cfg, ctx).await.map_err(|e| e.to_string())?;

@@ -37,6 +37,9 @@ pub struct StepDifferences {
     pub decayed: usize,
     /// `Trainer::pair_overflows` after steps 1 and 2.
     pub pair_overflows: [usize; 2],
+    /// The view's log gain as step 1 measured it (`frame_gain` `None`): (GPU, CPU
+    /// oracle, pixels counted on the GPU).
+    pub gain: Option<(f32, f32, u32)>,
 }
 
 fn flat(p: &Params<f32>) -> Vec<f32> {
@@ -95,21 +98,24 @@ fn reg_data(n: usize, z: &[f32], rng: &mut Rng) -> RegData {
 /// binds (`None`: as many as fit, one pass here); `pair_margin` (`None`: the default)
 /// sizes step 2's pair buffers from step 1's count (below 1 step 2 overflows them and
 /// runs again); `robust_c` weighs the RGB term robustly (`LossConfig::robust_c`, 0:
-/// plain L1); `frame_gain`: the view's own log gain on top of its camera's exposure
-/// (`Session::frame_gain`), which the oracle renders as exposure a.
+/// plain L1); `frame_gain`: the view's own log gain on top of its camera's exposure,
+/// which the oracle renders as exposure a, or `None`: step 1 measures it from its
+/// forward pass (`optim::gain`, the target then darker than the render) and trains
+/// at it, and the oracle measures it from its own render (`frame_gain_cpu`).
 pub async fn compare_step(
     ctx: GpuContext,
     mode: super::AdamScope,
     moment_window: Option<usize>,
     pair_margin: Option<f64>,
     robust_c: f32,
-    frame_gain: f32,
+    frame_gain: Option<f32>,
 ) -> Result<StepDifferences, GpuError> {
     let ch = 4;
     let (p0, mut cam) = test_scene(ch);
     // The trainer's exposures start at zero on the GPU, so that the view's exposure
     // is its frame gain alone.
-    cam.exposure = [frame_gain, 0.0];
+    cam.exposure = [frame_gain.unwrap_or(0.0), 0.0];
+    let measure = frame_gain.is_none();
     let n = p0.len();
     let mut rng = Rng::new(11);
     let z: Vec<f32> = p0.pos.iter().map(|q| q[2]).collect();
@@ -124,10 +130,12 @@ pub async fn compare_step(
     cfg.loss.min_alpha = 0.2;
     cfg.loss.robust_c = robust_c;
     let npx = (cam.width * cam.height) as usize;
-    // Random colours; a tenth of the pixels masked out.
+    // Random colours (at most half as bright when the gain is measured, so that it
+    // is far from 0); a tenth of the pixels masked out.
+    let bits = if measure { 0x7f_7f7f } else { 0xff_ffff };
     let target: Vec<u32> = (0..npx)
         .map(|_| {
-            let c = (rng.next_u64() & 0xff_ffff) as u32;
+            let c = (rng.next_u64() & bits) as u32;
             let cls = if rng.uniform() < 0.1 {
                 255
             } else {
@@ -143,11 +151,20 @@ pub async fn compare_step(
         .map_err(|e| GpuError::Validation(e.to_string()))?;
     let cull = cfg.cull;
     let mut out = StepDifferences::default();
-    // CPU chain of step 1.
-    let f = render(&p0, &cam, &cull);
+    // CPU chain of step 1, at the gain the oracle measures when step 1 measures it.
+    let mut cpu_cam = cam;
+    let mut gain_cpu = None;
+    if measure {
+        let f0 = render(&p0, &cam, &cull);
+        let m = super::gain::frame_gain_cpu(&f0.image, &target, cfg.loss.min_alpha);
+        cpu_cam.exposure[0] = m.log_gain;
+        gain_cpu = Some(m.log_gain);
+    }
+    let cam1 = cpu_cam;
+    let f = render(&p0, &cam1, &cull);
     let (l, og) = photometric(&f.image, &target, &cfg.loss, 1.0 / mask as f32);
-    let (vg, exp_g) = rasterize_backward::backward(&p0, &cam, &f, &og);
-    let mut g = project_backward::backward(&p0, &cam, &vg);
+    let (vg, exp_g) = rasterize_backward::backward(&p0, &cam1, &f, &og);
+    let mut g = project_backward::backward(&p0, &cam1, &vg);
     let w = reg.weights(&cfg.loss, true);
     let cand0 = crate::render::candidates::candidates(&p0.pos, &cam, &cull, None);
     let all: Vec<u32> = (0..n as u32).collect();
@@ -158,7 +175,15 @@ pub async fn compare_step(
         g.pos[i as usize][2] += dz;
     }
     let to_gpu = |e: super::train::TrainError| GpuError::Validation(e.to_string());
-    let gl = t.step(&cam, 0, &target, mask).await.map_err(to_gpu)?;
+    let s1 = t
+        .step_with(&cam, 0, &target, mask, None, measure)
+        .await
+        .map_err(to_gpu)?;
+    let gl = s1.loss;
+    out.gain = s1
+        .gain
+        .zip(gain_cpu)
+        .map(|(g, c)| (g.log_gain, c, g.pixels));
     out.losses = vec![
         ("rgb", gl.rgb, l.rgb),
         ("ce", gl.ce, l.ce),
@@ -329,10 +354,11 @@ pub async fn compare_pose_grad(ctx: GpuContext) -> Result<([f64; 6], [f64; 6]), 
     let (vg, _) = rasterize_backward::backward(&p0, &cam, &f, &og);
     let g = project_backward::backward(&p0, &cam, &vg);
     let cpu = super::pose::gradient(&p0, &g, centre.map(|v| v as f64));
-    let (_, gpu) = t
-        .step_with_pose(&cam, 0, &target, npx, Some(centre))
+    let gpu = t
+        .step_with(&cam, 0, &target, npx, Some(centre), false)
         .await
-        .map_err(|e| GpuError::Validation(e.to_string()))?;
+        .map_err(|e| GpuError::Validation(e.to_string()))?
+        .pose;
     let gpu = gpu.ok_or_else(|| GpuError::Validation("no pose gradient".into()))?;
     Ok((gpu, cpu))
 }

@@ -5,6 +5,7 @@
 pub mod adam;
 pub mod bench;
 pub mod check;
+pub mod gain;
 pub mod pose;
 pub mod train;
 
@@ -48,7 +49,8 @@ pub struct TrainConfig {
     /// Which surfels' parameters a step updates (shaders/adam.wgsl).
     pub adam: AdamScope,
     /// A gain per frame on top of the camera's exposure, measured at each view's
-    /// first step (`Session::frame_gain`); held-out views take their neighbours'.
+    /// first step from its own forward pass (`optim::gain`); held-out views take
+    /// their neighbours'.
     pub frame_exposure: bool,
 }
 

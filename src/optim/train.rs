@@ -5,7 +5,9 @@
 //! view's pair count. It does not wait for the GPU in the middle of a step.
 //!
 //! Step: `forward` (on the view's candidate surfels, `render::candidates`, with pair
-//! buffers sized from the pairs per candidate seen so far) → `loss` (per-pixel
+//! buffers sized from the pairs per candidate seen so far) → at a view's first step
+//! with frame gains, `frame_gain` (its gain from that forward pass, into the view
+//! uniform: `optim::gain`) → `loss` (per-pixel
 //! gradients) → `rasterize_backward` + `project_backward` (parameter gradients in
 //! place in the per-candidate view gradients) → `regularise` (z gradients of every
 //! surfel) → `adam` (dense, the default: every surfel, finding a candidate's slot
@@ -21,6 +23,7 @@
 //! kept.
 
 use super::adam::{learnable, StepConstants};
+use super::gain::{FrameGain, Measured};
 use super::pose::{PoseGrad, PosePartials};
 use super::TrainConfig;
 use crate::gpu::buffers::{
@@ -84,6 +87,7 @@ struct Kernels {
     /// `sync_known`: the z the host knows into the moments' blocks.
     sync: wgpu::ComputePipeline,
     pose: PoseGrad,
+    gain: FrameGain,
 }
 
 impl Kernels {
@@ -104,7 +108,11 @@ impl Kernels {
             loss: pipeline(
                 ctx,
                 "loss",
-                &[LossParams::WGSL, include_str!("../../shaders/loss.wgsl")],
+                &[
+                    &VIEW_WGSL,
+                    LossParams::WGSL,
+                    include_str!("../../shaders/loss.wgsl"),
+                ],
                 "main",
             ),
             regularise: pipeline(
@@ -125,6 +133,7 @@ impl Kernels {
             loss_sums: PartialSums::new(ctx, "loss_sums", 2, true),
             reg_sums: PartialSums::new(ctx, "regularise_sums", 3, false),
             pose: PoseGrad::new(ctx),
+            gain: FrameGain::new(ctx),
         }
     }
 }
@@ -174,10 +183,19 @@ pub struct Trainer {
     pub pair_overflows: usize,
 }
 
+/// What a step gave besides the update.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct StepOut {
+    pub loss: StepLoss,
+    /// dL/d(ω, τ), when a pose centre was given.
+    pub pose: Option<[f64; 6]>,
+    /// The view's gain, when the step measured it.
+    pub gain: Option<Measured>,
+}
+
 /// What one try of a step ended with.
 enum Try {
-    /// The loss, and the pose gradient when it was asked for.
-    Done(StepLoss, Option<[f64; 6]>),
+    Done(StepOut),
     /// The pairs overflowed the capacity; nothing was applied.
     Overflow,
 }
@@ -474,31 +492,43 @@ impl Trainer {
         mask_count: usize,
     ) -> Result<StepLoss, TrainError> {
         Ok(self
-            .step_with_pose(cam, camera, target, mask_count, None)
+            .step_with(cam, camera, target, mask_count, None, false)
             .await?
-            .0)
+            .loss)
     }
 
     /// `step`, and with `pose_centre` (the view's vehicle position, local frame) also
     /// the rendering loss's gradient with respect to a correction of the view's
-    /// vehicle pose about it (`optim::pose`), dL/d(ω, τ).
-    pub async fn step_with_pose(
+    /// vehicle pose about it (`optim::pose`), dL/d(ω, τ). With `measure_gain` the
+    /// view's own gain is measured from the step's forward pass (rendered with
+    /// `cam.exposure[0]`, the frame gain, as given: 0 for a view not yet measured)
+    /// and the step trains at it (`optim::gain`).
+    pub async fn step_with(
         &mut self,
         cam: &ViewCamera,
         camera: usize,
         target: &[u32],
         mask_count: usize,
         pose_centre: Option<[f32; 3]>,
-    ) -> Result<(StepLoss, Option<[f64; 6]>), TrainError> {
+        measure_gain: bool,
+    ) -> Result<StepOut, TrainError> {
         let target = init_storage(&self.ctx, "target", bytes_of(target));
         let camera = camera.min(self.cameras.saturating_sub(1));
         let mut capacity = self.pair_capacity(camera);
         loop {
             match self
-                .try_step(cam, camera, &target, mask_count, capacity, pose_centre)
+                .try_step(
+                    cam,
+                    camera,
+                    &target,
+                    mask_count,
+                    capacity,
+                    pose_centre,
+                    measure_gain,
+                )
                 .await?
             {
-                Try::Done(loss, pose) => return Ok((loss, pose)),
+                Try::Done(out) => return Ok(out),
                 Try::Overflow => {
                     self.pair_overflows += 1;
                     capacity = None;
@@ -516,6 +546,7 @@ impl Trainer {
 
     /// The step with pair buffers for `capacity` pairs (`None`: the exact count, read
     /// back).
+    #[allow(clippy::too_many_arguments)]
     async fn try_step(
         &mut self,
         cam: &ViewCamera,
@@ -524,6 +555,7 @@ impl Trainer {
         mask_count: usize,
         capacity: Option<u32>,
         pose_centre: Option<[f32; 3]>,
+        measure_gain: bool,
     ) -> Result<Try, TrainError> {
         let ctx = &self.ctx;
         let ch = self.params.channels;
@@ -567,6 +599,12 @@ impl Trainer {
         let partial = storage(ctx, "loss_partial", 8 * wgs.max(1) as u64);
         let mut enc = ctx.device.create_command_encoder(&Default::default());
         enc.clear_buffer(&self.status, 0, None);
+        // The view's gain, into its uniform before the loss reads it.
+        let gain = measure_gain.then(|| {
+            self.k
+                .gain
+                .encode(ctx, &mut enc, &f, target, self.cfg.loss.min_alpha)
+        });
         let bg = bind(
             ctx,
             &self.k.loss,
@@ -580,6 +618,7 @@ impl Trainer {
                 (6, &terms),
                 (7, &self.status),
                 (8, &f.total),
+                (9, &f.view),
             ],
         );
         dispatch(&mut enc, &self.k.loss, &bg, groups);
@@ -636,12 +675,13 @@ impl Trainer {
         // Each invocation's terms, summed per 256 invocations by `regularise_sums`.
         let reg_terms = storage(ctx, "regularise_terms", 4 * 3 * 256 * swgs as u64);
         // Read back at the end: the regulariser's partial sums, the two status words,
-        // the pair count and the loss's partial sums.
+        // the pair count, the loss's partial sums, the pose's and the gain's words.
         let tail = 3 * swgs;
+        let gain_floats = if gain.is_some() { 4 } else { 0 };
         let readback = storage(
             ctx,
             "step_readback",
-            4 * (tail + 3 + 2 * wgs + pose_floats) as u64,
+            4 * (tail + 3 + 2 * wgs + pose_floats + gain_floats) as u64,
         );
         let bg = bind(
             ctx,
@@ -775,9 +815,14 @@ impl Trainer {
         if let Some(p) = &pose {
             enc.copy_buffer_to_buffer(&p.buffer, 0, &readback, at(pose_at), at(pose_floats));
         }
+        let gain_at = pose_at + pose_floats;
+        if let Some(g) = &gain {
+            enc.copy_buffer_to_buffer(g, 0, &readback, at(gain_at), at(gain_floats));
+        }
         ctx.queue.submit([enc.finish()]);
-        let sums = read_f32(ctx, &readback, pose_at + pose_floats).await?;
-        let pose = pose.map(|_| PosePartials::sum(&sums[pose_at..]));
+        let sums = read_f32(ctx, &readback, gain_at + gain_floats).await?;
+        let pose = pose.map(|_| PosePartials::sum(&sums[pose_at..gain_at]));
+        let gain = gain.map(|_| Measured::from_words(&sums[gain_at..]));
         // Out of memory or a lost device: stop with the words rather than train on.
         ctx.check()?;
         let pairs = sums[tail + 2].to_bits();
@@ -826,7 +871,7 @@ impl Trainer {
                 what: "the loss",
             });
         }
-        Ok(Try::Done(loss, pose))
+        Ok(Try::Done(StepOut { loss, pose, gain }))
     }
 
     /// Reads the positions back into the host's copy that candidate lists use (and

@@ -249,6 +249,9 @@ pub struct GpuForward {
 
 /// Byte offset of (exposure_a, exposure_b) in the `View` uniform.
 const VIEW_EXPOSURE_OFFSET: u64 = 4 * 23;
+/// Byte offset of `frame_a`, the frame's log gain, in the `View` uniform (the
+/// optimiser copies a gain measured in the step there: `optim::gain`).
+pub const VIEW_FRAME_A_OFFSET: u64 = 4 * 30;
 
 /// The `View` uniform of shaders/view.wgsl; `frame_a`: the frame's log gain on top
 /// of the exposure (a, b).

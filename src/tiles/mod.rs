@@ -368,12 +368,9 @@ pub struct TileReport {
     /// Restored from a checkpoint of an earlier run (`--resume`), not trained here.
     #[serde(default)]
     pub restored: bool,
-    /// The views' own gains (report.json's `frame_gains`) and the time spent
-    /// measuring them.
+    /// The views' own gains (report.json's `frame_gains`).
     #[serde(default)]
     pub frame_gains: serde_json::Value,
-    #[serde(default)]
-    pub exposure_ms: f64,
     /// The process's resident memory as the tile was added to the map (natively).
     #[serde(default)]
     pub host_bytes: Option<u64>,
@@ -865,7 +862,6 @@ impl TiledRun {
             stopped: s.stopped.clone(),
             restored: false,
             frame_gains: crate::reconstruct::frame_gain_summary(&s.frame_gains),
-            exposure_ms: s.timings.exposure_ms,
             host_bytes: None,
         };
         let mut file = None;
@@ -1314,7 +1310,6 @@ impl TiledRun {
             r["timings"]["train_ms"] = (train_s * 1e3).into();
             r["timings"]["prepare_ms"] = rs.iter().map(|t| t.prepare_ms).sum::<f64>().into();
             r["timings"]["bev_ms"] = rs.iter().map(|t| t.bev_ms).sum::<f64>().into();
-            r["timings"]["exposure_ms"] = rs.iter().map(|t| t.exposure_ms).sum::<f64>().into();
             r["frame_gains"] =
                 crate::reconstruct::merge_frame_gains(rs.iter().map(|t| &t.frame_gains));
             r["seconds_per_step"] =

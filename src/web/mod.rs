@@ -187,6 +187,7 @@ pub async fn bench_step(
         half_width,
         moment_window: None,
         adam: crate::optim::TrainConfig::default().adam,
+        frame_exposure: crate::optim::TrainConfig::default().frame_exposure,
     };
     let now = || js_sys::Date::now() / 1e3;
     let out = step(&mut b, "bundle", &o, ctx, &now)

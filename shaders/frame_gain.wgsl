@@ -2,9 +2,10 @@
 //! first time the view is stepped (auto-exposure changes a real camera's brightness
 //! from frame to frame, which one exposure per camera would bake into the map's
 //! colours). g = ln(Σ target / Σ render) over the loss mask's pixels that the model
-//! covers (alpha ≥ `min_alpha`), rendered with the camera's exposure and a frame
-//! gain of 0, clamped to ±`max_log_gain`; 0 with fewer than `min_pixels` pixels or a
-//! dark render, which say nothing about the frame's exposure. A ratio of sums, not a
+//! covers (alpha ≥ `min_alpha`: 0.95 or the loss's, the larger, src/optim/gain.rs),
+//! rendered with the camera's exposure and a frame gain of 0, clamped to
+//! ±`max_log_gain`; 0 with fewer than `min_pixels` pixels or a dark render, which say
+//! nothing about the frame's exposure. A ratio of sums, not a
 //! least-squares fit: a fit of the target on a blurred render shrinks the gain toward
 //! the mean. A mean needs no detail, so only every `stride`-th pixel of every
 //! `stride`-th row counts (at least `GAIN_PIXELS` of them, src/optim/gain.rs).
@@ -13,7 +14,7 @@
 //! `rasterize_backward` run, so the same step trains the view at its gain, and reads
 //! the four words back with the step's sums: no second forward pass and no read-back
 //! in the middle of the step (both cost 3.5 s of the page's 78-view demo when the
-//! gain was measured apart). One invocation sums every sampled pixel (16–33 k, well
+//! gain was measured apart). One invocation sums every sampled pixel (16–66 k, well
 //! under a millisecond on lavapipe and SwiftShader): no workgroup memory and no
 //! barrier, which SwiftShader runs as coroutines (partial_sums.wgsl says why).
 //!
@@ -42,7 +43,7 @@ fn main() {
             let i = y * gp.width + kx * s + s / 2u;
             let t = target_px[i];
             let o = PIX_STRIDE * i;
-            if (t >> 24u) == 255u || px_out[o + 4u] < max(gp.min_alpha, GAIN_MIN_ALPHA) {
+            if (t >> 24u) == 255u || px_out[o + 4u] < gp.min_alpha {
                 continue;
             }
             st += f32((t & 255u) + ((t >> 8u) & 255u) + ((t >> 16u) & 255u));

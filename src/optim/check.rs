@@ -152,15 +152,14 @@ pub async fn compare_step(
     let cull = cfg.cull;
     let mut out = StepDifferences::default();
     // CPU chain of step 1, at the gain the oracle measures when step 1 measures it.
-    let mut cpu_cam = cam;
+    let mut cam1 = cam;
     let mut gain_cpu = None;
     if measure {
         let f0 = render(&p0, &cam, &cull);
         let m = super::gain::frame_gain_cpu(&f0.image, &target, cfg.loss.min_alpha);
-        cpu_cam.exposure[0] = m.log_gain;
+        cam1.exposure[0] = m.log_gain;
         gain_cpu = Some(m.log_gain);
     }
-    let cam1 = cpu_cam;
     let f = render(&p0, &cam1, &cull);
     let (l, og) = photometric(&f.image, &target, &cfg.loss, 1.0 / mask as f32);
     let (vg, exp_g) = rasterize_backward::backward(&p0, &cam1, &f, &og);

@@ -27,7 +27,8 @@ crate::uniform_block! {
         /// Every `stride`-th pixel of every `stride`-th row counts.
         stride: u32,
         min_pixels: u32,
-        /// Pixels the model covers less than this are left out (the loss's).
+        /// Pixels the model covers less than this are left out: the loss's
+        /// threshold or `GAIN_MIN_ALPHA`, the larger.
         min_alpha: f32,
         max_log_gain: f32,
         pad0: u32,
@@ -109,7 +110,6 @@ impl FrameGain {
                 &[
                     &VIEW_WGSL,
                     GainParams::WGSL,
-                    &format!("const GAIN_MIN_ALPHA: f32 = {GAIN_MIN_ALPHA:?};"),
                     include_str!("../../shaders/frame_gain.wgsl"),
                 ],
                 "main",
@@ -134,7 +134,7 @@ impl FrameGain {
             height: f.height,
             stride: stride(f.width, f.height),
             min_pixels: MIN_GAIN_PIXELS,
-            min_alpha,
+            min_alpha: min_alpha.max(GAIN_MIN_ALPHA),
             max_log_gain: MAX_FRAME_LOG_GAIN,
             ..GainParams::default()
         };

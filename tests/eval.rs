@@ -2,7 +2,9 @@
 //! hand-made perturbations. Invalid pixels never count.
 #![cfg(not(target_arch = "wasm32"))]
 
-use rogs::eval::{elevation_vs_points, elevation_vs_raster, error_stats, miou, psnr, BevRaster};
+use rogs::eval::{
+    elevation_vs_points, elevation_vs_raster, error_stats, miou, paper_psnr, psnr, BevRaster,
+};
 
 /// 10×10 raster at 0.1 m: left half class 0 (grey 100), right half class 1 (white
 /// 200), elevation 1.0 m; the last row is invalid.
@@ -49,6 +51,43 @@ fn psnr_of_a_perturbation_equals_hand_computation() {
     // Averaging masked zeros in (the original code's quirk) would give 100 pixels.
     let quirk = -10.0 * ((0.2f64 * 0.2) / 100.0).log10();
     assert!((psnr(&p, &t).unwrap() - quirk).abs() > 0.3);
+}
+
+#[test]
+fn the_papers_psnr_equals_hand_computation_of_its_quirks() {
+    // The reference: grey 90 on the valid cells (the last row invalid); the map:
+    // grey 102 everywhere and not covering column 0 either.
+    let mut t = raster();
+    let mut p = raster();
+    for row in 0..10 {
+        for col in 0..10 {
+            t.rgb.put_pixel(col, row, image::Rgb([90; 3]));
+            p.rgb.put_pixel(col, row, image::Rgb([102; 3]));
+        }
+        p.valid.put_pixel(0, row, image::Luma([0]));
+    }
+    // Shared cells: 9 rows × 9 columns = 81; the paper divides by all 100 cells and
+    // reads the reference over 225: error 102/255 − 90/225 = 0.4 − 0.4 = 0 per
+    // channel: its floor, 100 dB.
+    assert!((paper_psnr(&p, &t).unwrap() - 100.0).abs() < 1e-9);
+    // Corrected: over the 81 shared cells, both over 255: (12/255)².
+    let d = 12.0f64 / 255.0;
+    assert!((psnr(&p, &t).unwrap() - -10.0 * (d * d).log10()).abs() < 1e-9);
+    // A map at 0 where the reference reads 45 (0.2 over 225): the paper's mean is
+    // 81 · 3 · 0.04 / (100 · 3), the corrected one 0.04.
+    for row in 0..10 {
+        for col in 0..10 {
+            t.rgb.put_pixel(col, row, image::Rgb([45; 3]));
+            p.rgb.put_pixel(col, row, image::Rgb([0; 3]));
+        }
+    }
+    let paper = -10.0 * (0.04f64 * 81.0 / 100.0).log10();
+    assert!((paper_psnr(&p, &t).unwrap() - paper).abs() < 1e-9);
+    let d = 45.0f64 / 255.0;
+    assert!((psnr(&p, &t).unwrap() - -10.0 * (d * d).log10()).abs() < 1e-9);
+    // Nothing shared: no figure.
+    p.valid.fill(0);
+    assert_eq!(paper_psnr(&p, &t), None);
 }
 
 #[test]

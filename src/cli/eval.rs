@@ -26,6 +26,13 @@ pub struct Args {
     /// Resolution of the pseudo-ground-truth raster when the bundle has no truth.
     #[arg(long, default_value_t = 0.05)]
     resolution: f64,
+    /// `paper`: also score the map against the paper's reference, the LiDAR
+    /// pseudo-ground-truth through the bundle's own poses (even where the bundle has
+    /// truth), rasterised on the map's grid, as the paper's evaluation code scores
+    /// it and corrected:
+    /// `metrics.paper_protocol` (docs/QUALITY.md says how the two differ). Needs LiDAR.
+    #[arg(long, value_parser = ["paper"])]
+    protocol: Option<String>,
 }
 
 #[derive(Deserialize)]
@@ -126,6 +133,15 @@ pub fn run(a: Args) -> Result<ExitCode, String> {
         if let Some(t) = &truth {
             m.vs_reference =
                 crate::eval::vs_reference(&bundle, t, &pred).map_err(|e| e.to_string())?;
+        }
+        if a.protocol.is_some() {
+            m.paper_protocol = Some(
+                crate::eval::paper_protocol(&bundle, &pred, &points)
+                    .map_err(|e| e.to_string())?
+                    .ok_or(
+                        "--protocol paper scores against LiDAR, and the bundle has no LiDAR points",
+                    )?,
+            );
         }
         m
     };

@@ -5,8 +5,8 @@ pub mod pseudo_gt;
 pub mod raster;
 
 pub use metrics::{
-    class_iou, elevation_vs_points, elevation_vs_raster, error_stats, miou, psnr, ErrorStats,
-    Metrics, Tally, VsReference,
+    class_iou, elevation_vs_points, elevation_vs_raster, error_stats, miou, paper_psnr, psnr,
+    ErrorStats, Metrics, PaperProtocol, Tally, VsReference,
 };
 pub use raster::BevRaster;
 
@@ -64,7 +64,52 @@ pub fn score(
     m.elevation_rmse_m = e.map(|e| e.rmse);
     m.elevation_mae_m = e.map(|e| e.mae);
     m.elevation_p95_m = e.map(|e| e.p95);
+    m.paper_protocol = Some(paper_scores(&cloud, pred, points, &road));
     Ok(Some(m))
+}
+
+/// The map against the paper's LiDAR pseudo-ground-truth through the bundle's own
+/// poses, rasterised on the map's own grid (`PaperProtocol`), whether or not the
+/// bundle has BEV truth; `None` without LiDAR points, or when a lazily read bundle
+/// does not hold every sweep and image.
+pub fn paper_protocol(
+    b: &Bundle,
+    pred: &BevRaster,
+    points: &[[f64; 3]],
+) -> Result<Option<PaperProtocol>, Problem> {
+    let cloud = match pseudo_gt::lidar_cloud(b) {
+        Err(Problem::NotLoaded { .. }) => return Ok(None),
+        r => r?,
+    };
+    if cloud.points.is_empty() {
+        return Ok(None);
+    }
+    Ok(Some(paper_scores(
+        &cloud,
+        pred,
+        points,
+        &road_classes(&b.manifest),
+    )))
+}
+
+/// `PaperProtocol`: the cloud rasterised on the map's grid, as the paper renders its
+/// reference over the map's extent, and the map scored against it both ways.
+fn paper_scores(
+    cloud: &pseudo_gt::LidarCloud,
+    pred: &BevRaster,
+    points: &[[f64; 3]],
+    road: &[u8],
+) -> PaperProtocol {
+    let reference = pseudo_gt::rasterise(cloud, pred);
+    let shared = Tally::of(pred, &reference);
+    PaperProtocol {
+        raster_cells: (pred.width * pred.height) as usize,
+        cells: shared.covered() as usize,
+        paper_psnr_db: paper_psnr(pred, &reference),
+        psnr_db: shared.psnr(),
+        miou: shared.miou(road),
+        elevation_rmse_m: elevation_vs_points(points, &cloud.points, 0.1).map(|e| e.rmse),
+    }
 }
 
 /// The map `pred` against the exact-pose reference (`VsReference`), when the bundle
@@ -96,19 +141,36 @@ pub fn vs_reference(
         r => r?,
     };
     let reference = pseudo_gt::rasterise(&cloud, truth);
+    // The cells both score: the truth's cells that the reference covers and the
+    // map covers too, so the map and the reference are scored over the same cells
+    // (a map of a narrower corridor than the LiDAR's reach is not charged with, nor
+    // compared against the reference on, the cells it does not map).
     let mut cells = truth.clone();
-    for (v, r) in cells.valid.pixels_mut().zip(reference.valid.pixels()) {
-        if r.0[0] == 0 {
-            v.0[0] = 0;
+    let mut reference_cells = 0;
+    for r in 0..cells.height {
+        for c in 0..cells.width {
+            if !cells.is_valid(c, r) {
+                continue;
+            }
+            let in_ref = reference.is_valid(c, r);
+            reference_cells += usize::from(in_ref);
+            let (x, y) = cells.centre(c, r);
+            let in_map = pred.pixel_of(x, y).is_some_and(|p| pred.is_valid(p.0, p.1));
+            if !(in_ref && in_map) {
+                cells.valid.put_pixel(c, r, image::Luma([0]));
+            }
         }
     }
     let road = road_classes(&b.manifest);
     let (map, refr) = (Tally::of(pred, &cells), Tally::of(&reference, &cells));
     Ok(Some(VsReference {
         cells: cells.valid.pixels().filter(|p| p.0[0] != 0).count(),
+        reference_cells,
         map_psnr_db: map.psnr(),
         map_miou: map.miou(&road),
         ref_psnr_db: refr.psnr(),
         ref_miou: refr.miou(&road),
+        map_iou_per_class: map.class_iou(&road).into_iter().collect(),
+        ref_iou_per_class: refr.class_iou(&road).into_iter().collect(),
     }))
 }

@@ -17,7 +17,7 @@ runs=(
   "full|"
   "nearest|--init nearest"
   "uniform|--no-adaptive"
-  "no_traj|--no-traj-loss"
+  "with_traj|--traj-loss"
   "no_align|--no-pose-align"
   "no_gain|--no-frame-exposure"
   "no_lidar_colours|--no-lidar-colours"

@@ -34,7 +34,10 @@ pub struct Settings {
     /// "consensus" (default) or "nearest".
     #[serde(skip_serializing_if = "Option::is_none")]
     pub init: Option<String>,
-    /// The trajectory-prior loss L_traj; default true.
+    /// The trajectory-prior loss L_traj; default: on where the LiDAR term is off
+    /// (no LiDAR in the bundle, or `lidar` false), off where it is on (with aligned
+    /// LiDAR the prior pulls heights toward the poses' plane, the less accurate of
+    /// the two: docs/QUALITY.md, ablation).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub traj_loss: Option<bool>,
     /// Hold out every K-th frame and report road PSNR on them.
@@ -182,7 +185,7 @@ impl Settings {
         }
         c.train.max_steps = positive("max_steps", self.max_steps, "100")?;
         c.train.holdout_every = self.holdout_every.filter(|&k| k > 0);
-        if self.traj_loss == Some(false) {
+        if !self.traj_loss.unwrap_or(!(lidar && m.lidar.is_some())) {
             c.train.loss.traj = 0.0;
         }
         c.baseline_ipm = match self.baseline.as_deref() {
@@ -363,5 +366,24 @@ mod tests {
         // A misspelled setting is refused, not ignored.
         let e = serde_json::from_str::<Settings>(r#"{"resolutoin": 0.1}"#).expect_err("typo");
         assert!(e.to_string().contains("resolutoin"), "{e}");
+    }
+
+    #[test]
+    fn the_trajectory_prior_is_on_by_default_only_where_the_lidar_term_is_off() {
+        let (m, _) = crate::bundle::example::tiny();
+        assert!(m.lidar.is_some());
+        let traj = |json: &str, m: &Manifest| {
+            let s: Settings = serde_json::from_str(json).expect("settings");
+            s.config(m, CLI).expect("config").train.loss.traj
+        };
+        let on = crate::loss::LossConfig::default().traj;
+        assert!(on > 0.0);
+        assert_eq!(traj("{}", &m), 0.0);
+        assert_eq!(traj(r#"{"lidar": false}"#, &m), on);
+        assert_eq!(traj(r#"{"traj_loss": true}"#, &m), on);
+        assert_eq!(traj(r#"{"lidar": false, "traj_loss": false}"#, &m), 0.0);
+        let mut without = m.clone();
+        without.lidar = None;
+        assert_eq!(traj("{}", &without), on);
     }
 }

@@ -55,7 +55,7 @@ function settings() {
     ply_up: $('set-ply-up').value,
     ...(Number($('set-tile').value) > 0 ? { tile_m: Number($('set-tile').value) } : {}),
     tile_overlap_m: Number($('set-tile-overlap').value) || 0,
-    traj_loss: $('set-traj').checked,
+    ...($('set-traj').checked ? {} : { traj_loss: false }),
     ...($('set-frame-exposure').checked ? {} : { frame_exposure: false }),
     ...($('set-ipm').checked ? { baseline: 'ipm' } : {}),
     ...(Number($('set-holdout').value) > 0 ? { holdout_every: Number($('set-holdout').value) } : {}),

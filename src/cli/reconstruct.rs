@@ -108,9 +108,14 @@ pub struct SettingsArgs {
     /// How surfel heights start.
     #[arg(long, value_enum, default_value = "consensus")]
     init: Init,
-    /// Drop the trajectory-prior loss L_traj.
-    #[arg(long)]
+    /// Drop the trajectory-prior loss L_traj. By default it is on only where the
+    /// LiDAR term is off (a bundle without LiDAR, or --no-lidar): with aligned LiDAR
+    /// the prior pulls heights toward the poses' plane, the less accurate of the two.
+    #[arg(long, conflicts_with = "traj_loss")]
     no_traj_loss: bool,
+    /// Keep the trajectory-prior loss L_traj with LiDAR too (the paper's setting).
+    #[arg(long)]
+    traj_loss: bool,
     /// Which surfels a step updates: every parameter of every surfel (dense, the
     /// paper's Adam), or only those the step's view may see (selective: a step's
     /// cost follows the view, not the model; docs/PERFORMANCE.md says what it costs
@@ -255,7 +260,11 @@ impl SettingsArgs {
                 }
                 .into(),
             ),
-            traj_loss: Some(!a.no_traj_loss),
+            traj_loss: match (a.traj_loss, a.no_traj_loss) {
+                (true, _) => Some(true),
+                (_, true) => Some(false),
+                _ => None,
+            },
             holdout_every: a.holdout_every,
             baseline: a.baseline.map(|_| "ipm".into()),
             lr_z_start: a.lr_z_start,

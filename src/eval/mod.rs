@@ -64,7 +64,7 @@ pub fn score(
     m.elevation_rmse_m = e.map(|e| e.rmse);
     m.elevation_mae_m = e.map(|e| e.mae);
     m.elevation_p95_m = e.map(|e| e.p95);
-    m.paper_protocol = Some(paper_scores(&cloud, pred, points, &road));
+    m.paper_protocol = Some(paper_scores(&cloud, pred, m.elevation_rmse_m, &road));
     Ok(Some(m))
 }
 
@@ -84,20 +84,23 @@ pub fn paper_protocol(
     if cloud.points.is_empty() {
         return Ok(None);
     }
+    let elevation = elevation_vs_points(points, &cloud.points, 0.1).map(|e| e.rmse);
     Ok(Some(paper_scores(
         &cloud,
         pred,
-        points,
+        elevation,
         &road_classes(&b.manifest),
     )))
 }
 
 /// `PaperProtocol`: the cloud rasterised on the map's grid, as the paper renders its
-/// reference over the map's extent, and the map scored against it both ways.
+/// reference over the map's extent, and the map scored against it both ways
+/// (`elevation_rmse_m`: the surfel centres against the cloud, which the caller may
+/// already hold).
 fn paper_scores(
     cloud: &pseudo_gt::LidarCloud,
     pred: &BevRaster,
-    points: &[[f64; 3]],
+    elevation_rmse_m: Option<f64>,
     road: &[u8],
 ) -> PaperProtocol {
     let reference = pseudo_gt::rasterise(cloud, pred);
@@ -108,7 +111,7 @@ fn paper_scores(
         paper_psnr_db: paper_psnr(pred, &reference),
         psnr_db: shared.psnr(),
         miou: shared.miou(road),
-        elevation_rmse_m: elevation_vs_points(points, &cloud.points, 0.1).map(|e| e.rmse),
+        elevation_rmse_m,
     }
 }
 

@@ -44,14 +44,15 @@ rows.append(("reference: LiDAR pseudo-ground-truth (given poses)", "rogs eval --
 json.dump([{"run": n, "flags": f, "metrics": m, "train_s": t} for n, f, m, t in rows],
           open(os.path.join(d, "ablation.json"), "w"), indent=1)
 f = lambda v, k=1, s=1: "" if v is None else f"{v * s:.{k}f}"
-print("| run | flags | PSNR dB | mIoU | elev. RMSE cm | p95 cm | on the reference's cells: map PSNR / mIoU |")
-print("|---|---|---|---|---|---|---|")
+print("| run | flags | PSNR dB | mIoU | elev. RMSE cm | p95 cm | datum-free cm | on the reference's cells: map PSNR / mIoU |")
+print("|---|---|---|---|---|---|---|---|")
 for n, fl, m, _ in rows:
     v = m.get("vs_reference") or {}
     ref = f"{f(v.get('map_psnr_db'), 2)} / {f(v.get('map_miou'), 3)}" if v else ""
     code = f"`{fl}`" if fl else "(defaults)"
     print(f"| {n} | {code} | {f(m.get('psnr_db'), 2)} | {f(m.get('miou'), 3)} | "
-          f"{f(m.get('elevation_rmse_m'), 2, 100)} | {f(m.get('elevation_p95_m'), 1, 100)} | {ref} |")
+          f"{f(m.get('elevation_rmse_m'), 2, 100)} | {f(m.get('elevation_p95_m'), 1, 100)} | "
+          f"{f((m.get('elevation_datum') or {}).get('rmse_m'), 2, 100)} | {ref} |")
 v = rows[0][2].get("vs_reference") or {}
 print(f"\nexact-pose reference over the map's {v.get('cells')} cells: "
       f"{f(v.get('ref_psnr_db'), 2)} dB / {f(v.get('ref_miou'), 3)}")

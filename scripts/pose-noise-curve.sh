@@ -35,6 +35,7 @@ for cm in ["0", "2.5", "5", "10", "20"]:
             "noise_cm": float(cm), "run": name,
             "psnr_db": m.get("psnr_db"), "miou": m.get("miou"),
             "elevation_rmse_cm": 100 * m["elevation_rmse_m"] if m.get("elevation_rmse_m") is not None else None,
+            "elevation_datum_free_cm": 100 * m["elevation_datum"]["rmse_m"] if m.get("elevation_datum") else None,
             "initial_elevation_rmse_cm": 100 * m["initial_elevation_rmse_m"] if m.get("initial_elevation_rmse_m") is not None else None,
             "map_psnr_ref_cells_db": v.get("map_psnr_db"), "map_miou_ref_cells": v.get("map_miou"),
             "ref_psnr_db": v.get("ref_psnr_db"), "ref_miou": v.get("ref_miou"), "ref_cells": v.get("cells"),

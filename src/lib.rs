@@ -15,6 +15,7 @@ pub mod grid;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod import;
 pub mod init;
+pub mod linalg;
 pub mod loss;
 pub mod mem;
 pub mod optim;

@@ -3,7 +3,8 @@
 #![cfg(not(target_arch = "wasm32"))]
 
 use rogs::eval::{
-    elevation_vs_points, elevation_vs_raster, error_stats, miou, paper_psnr, psnr, BevRaster,
+    elevation_datum, elevation_vs_points, elevation_vs_raster, error_stats, miou, paper_psnr, psnr,
+    BevRaster,
 };
 
 /// 10×10 raster at 0.1 m: left half class 0 (grey 100), right half class 1 (white
@@ -127,6 +128,37 @@ fn elevation_errors_equal_hand_computation() {
     assert!((e.p95 - 0.3).abs() < 1e-6);
     let mut errs: Vec<f64> = (1..=100).map(|i| i as f64).collect();
     assert_eq!(error_stats(&mut errs).unwrap().p95, 95.0);
+}
+
+#[test]
+fn the_elevation_datum_is_the_plane_under_the_errors() {
+    // Errors: a plane (2 cm, +1 mm/m east, -2 mm/m north about the centroid) plus a
+    // ±5 mm checkerboard, which no plane fits on an even grid: the fit returns the
+    // plane and the checkerboard's 5 mm.
+    let (mut xy, mut e) = (Vec::new(), Vec::new());
+    for i in 0..10 {
+        for j in 0..10 {
+            let (x, y) = (100.0 + i as f64, 50.0 + j as f64);
+            xy.push([x, y]);
+            let sign = if (i + j) % 2 == 0 { 1.0 } else { -1.0 };
+            e.push(0.02 + 0.001 * (x - 104.5) - 0.002 * (y - 54.5) + 0.005 * sign);
+        }
+    }
+    let d = elevation_datum(&xy, &e).unwrap();
+    assert!((d.offset_m - 0.02).abs() < 1e-9, "{d:?}");
+    assert!((d.slope_x - 0.001).abs() < 1e-9 && (d.slope_y + 0.002).abs() < 1e-9);
+    assert!((d.rmse_m - 0.005).abs() < 1e-9);
+    // Through the raster: a constant error has a zero datum-free error.
+    let t = raster();
+    let pts: Vec<[f64; 3]> = (0..9)
+        .map(|k| [0.05 + 0.1 * k as f64, 0.95 - 0.1 * (k % 3) as f64, 1.03])
+        .collect();
+    let s = elevation_vs_raster(&pts, &t).unwrap();
+    let d = s.datum.unwrap();
+    assert!((s.rmse - 0.03).abs() < 1e-6 && (d.offset_m - 0.03).abs() < 1e-6);
+    assert!(d.rmse_m < 1e-6, "{d:?}");
+    // Points on one line leave the tilt across it unknown: no datum.
+    assert!(elevation_datum(&xy[..10], &e[..10]).is_none());
 }
 
 #[test]

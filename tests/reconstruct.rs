@@ -66,6 +66,14 @@ fn demo_reconstruction_beats_the_ipm_baseline_and_meets_measured_floors() {
     let e0 = m.initial_elevation_rmse_m.expect("initial elevation RMSE");
     assert!((e0 - eb).abs() < 0.25 * eb, "initial {e0} m, IPM {eb} m");
     assert!(e < 0.5 * e0, "elevation RMSE {e} m, initial {e0} m");
+    // Exact poses carry no datum to remove: the fitted offset is the map's own
+    // (measured 2.1 mm, tilt under 1 mm/m), and the error without it is no larger.
+    let d = m.elevation_datum.expect("elevation datum");
+    assert!(
+        d.rmse_m <= e + 1e-9 && d.offset_m.abs() < 0.005,
+        "{d:?}, RMSE {e}"
+    );
+    assert!(d.slope_x.abs() < 0.003 && d.slope_y.abs() < 0.003, "{d:?}");
     // The exact-pose LiDAR reference: what the paper's procedure makes of these
     // inputs, scored with the map over the cells both cover (the LiDAR reaches
     // beyond the map's 4 m corridor). Measured (this bundle: one ray per pixel,
@@ -140,6 +148,38 @@ fn demo_reconstruction_beats_the_ipm_baseline_and_meets_measured_floors() {
     );
     let ply = files.iter().find(|f| f.0 == "surfels.ply").expect("ply");
     assert!(ply.1.starts_with(b"ply\nformat binary_little_endian 1.0"));
+}
+
+/// Every pose raised by the same 3 cm: sweeps, images and map move together, and no
+/// input can tell (the elevation datum, `eval::ElevationDatum`). The map's datum
+/// follows the poses' by those 3 cm, and its error without the datum stays the
+/// same: what `elevation_datum.rmse_m` is meant to isolate.
+#[test]
+fn a_height_offset_shared_by_every_pose_is_the_maps_datum_and_nothing_else() {
+    let mut b = demo_bundle();
+    let mut cfg = ReconstructConfig::default();
+    cfg.prepare.grid.half_width = 4.0;
+    let (_, o) = run(&mut b, cfg.clone());
+    let d0 = o.metrics.and_then(|m| m.elevation_datum).expect("datum");
+    const LIFT: f64 = 0.03;
+    for f in &mut b.manifest.frames {
+        f.vehicle_to_world[2][3] += LIFT;
+        for v in &mut f.views {
+            if let Some(t) = &mut v.vehicle_to_world {
+                t[2][3] += LIFT;
+            }
+        }
+    }
+    let (_, o) = run(&mut b, cfg);
+    let m = o.metrics.expect("truth metrics");
+    let d1 = m.elevation_datum.expect("datum");
+    eprintln!("datum {d0:?} -> {d1:?}, RMSE {:?}", m.elevation_rmse_m);
+    assert!(
+        (d1.offset_m - d0.offset_m - LIFT).abs() < 0.003,
+        "{d0:?} {d1:?}"
+    );
+    assert!((d1.rmse_m - d0.rmse_m).abs() < 0.002, "{d0:?} {d1:?}");
+    assert!(m.elevation_rmse_m.unwrap() > LIFT * 0.9, "{m:?}");
 }
 
 /// A drive without masks (the demo with its labels withheld, LiDAR kept): the road

@@ -24,6 +24,10 @@ pub struct Metrics {
     /// any training (with truth).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub initial_elevation_rmse_m: Option<f64>,
+    /// The elevation error's datum (a shared offset and tilt) and the error without
+    /// it (against a truth raster).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub elevation_datum: Option<ElevationDatum>,
     /// The map and the exact-pose LiDAR reference over the reference's cells
     /// (`eval::vs_reference`).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -228,6 +232,7 @@ impl Tally {
             elevation_mae_m: e.map(|e| e.mae),
             elevation_p95_m: e.map(|e| e.p95),
             coverage: self.coverage(),
+            elevation_datum: e.and_then(|e| e.datum),
             ..Default::default()
         }
     }
@@ -263,6 +268,61 @@ pub struct ErrorStats {
     pub mae: f64,
     pub p95: f64,
     pub count: usize,
+    /// The plane fitted to the errors, where their positions are known.
+    pub datum: Option<ElevationDatum>,
+}
+
+/// The elevation error's datum: the plane `offset_m + slope_x·(x − x̄) + slope_y·(y − ȳ)`
+/// (x̄, ȳ: the mean position of the surfel centres scored) fitted by least squares to
+/// their errors against the truth, and `rmse_m`, the error with that plane taken out.
+///
+/// Why: the inputs fix the map's height only as well as the poses fix theirs. A
+/// shared offset or tilt of every pose (the mean of their noise over the drive)
+/// moves the sweeps and the images, and so the map, with it, and no agreement
+/// between them can see it (the LiDAR alignment removes the same plane from its
+/// corrections, `init::align`). With 5 cm of height noise on 26 sweeps the offset
+/// alone is 0.8 cm (one standard deviation). `rmse_m` is what the map's elevation
+/// holds beyond the poses' datum, as trajectories are scored after a rigid
+/// alignment; `elevation_rmse_m` keeps the datum.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct ElevationDatum {
+    pub offset_m: f64,
+    /// Metres per metre east and north.
+    pub slope_x: f64,
+    pub slope_y: f64,
+    pub rmse_m: f64,
+}
+
+/// The datum of errors `e` at positions `xy` (`ElevationDatum`); `None` with fewer
+/// than three errors or positions on one line.
+pub fn elevation_datum(xy: &[[f64; 2]], e: &[f64]) -> Option<ElevationDatum> {
+    let n = xy.len().min(e.len());
+    if n < 3 {
+        return None;
+    }
+    let mean = xy[..n].iter().fold([0.0; 2], |s, p| {
+        [s[0] + p[0] / n as f64, s[1] + p[1] / n as f64]
+    });
+    let (mut m, mut rhs) = ([0.0f64; 6], [0.0f64; 3]);
+    for (p, &v) in xy.iter().zip(e) {
+        let g = [1.0, p[0] - mean[0], p[1] - mean[1]];
+        crate::linalg::accumulate3(&mut m, &mut rhs, g, 1.0, v);
+    }
+    let [a, b, c] = crate::linalg::solve3(&m, &rhs, 3.0)?;
+    let se: f64 = xy
+        .iter()
+        .zip(e)
+        .map(|(p, &v)| {
+            let r = v - (a + b * (p[0] - mean[0]) + c * (p[1] - mean[1]));
+            r * r
+        })
+        .sum();
+    Some(ElevationDatum {
+        offset_m: a,
+        slope_x: b,
+        slope_y: c,
+        rmse_m: (se / n as f64).sqrt(),
+    })
 }
 
 pub fn error_stats(errors: &mut [f64]) -> Option<ErrorStats> {
@@ -283,17 +343,23 @@ pub fn error_stats(errors: &mut [f64]) -> Option<ErrorStats> {
         mae,
         p95: errors[k],
         count: errors.len(),
+        datum: None,
     })
 }
 
 /// Elevation errors of `points` (surfel centres, world xyz) against the truth raster,
-/// for points over valid truth.
+/// for points over valid truth, with their datum (`ElevationDatum`).
 pub fn elevation_vs_raster(points: &[[f64; 3]], truth: &BevRaster) -> Option<ErrorStats> {
-    let mut errors: Vec<f64> = points
+    let (xy, mut errors): (Vec<[f64; 2]>, Vec<f64>) = points
         .iter()
-        .filter_map(|p| truth.elevation_xy(p[0], p[1]).map(|z| p[2] - z))
-        .collect();
-    error_stats(&mut errors)
+        .filter_map(|p| {
+            truth
+                .elevation_xy(p[0], p[1])
+                .map(|z| ([p[0], p[1]], p[2] - z))
+        })
+        .unzip();
+    let datum = elevation_datum(&xy, &errors);
+    error_stats(&mut errors).map(|s| ErrorStats { datum, ..s })
 }
 
 /// Elevation errors against reference points (accumulated LiDAR): for each point the

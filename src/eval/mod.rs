@@ -5,8 +5,8 @@ pub mod pseudo_gt;
 pub mod raster;
 
 pub use metrics::{
-    class_iou, elevation_vs_points, elevation_vs_raster, error_stats, miou, paper_psnr, psnr,
-    ErrorStats, Metrics, PaperProtocol, Tally, VsReference,
+    class_iou, elevation_datum, elevation_vs_points, elevation_vs_raster, error_stats, miou,
+    paper_psnr, psnr, ElevationDatum, ErrorStats, Metrics, PaperProtocol, Tally, VsReference,
 };
 pub use raster::BevRaster;
 

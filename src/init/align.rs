@@ -25,6 +25,7 @@ use crate::bundle::transform::apply;
 use crate::bundle::{Bundle, Problem};
 use crate::bundle::{Manifest, Mat4Rows};
 use crate::init::prepare::for_each_sweep_of;
+use crate::linalg::{accumulate3, solve3};
 use glam::{DMat3, DVec3};
 
 /// Settings of the alignment (defaults for driving sweeps).
@@ -335,7 +336,7 @@ pub fn align(returns: &GroundReturns, frames: usize, cfg: &AlignConfig) -> Align
             let w = (cfg.huber_m / e.abs().max(1e-12)).min(1.0);
             let s = r.sweep as usize;
             let d = r.d.map(f64::from);
-            accumulate(&mut ata[s], &mut atb[s], [1.0, d[0], d[1]], w, -e);
+            accumulate3(&mut ata[s], &mut atb[s], [1.0, d[0], d[1]], w, -e);
         }
         rms.push((sq / inl.max(1) as f64).sqrt());
         if round == cfg.rounds {
@@ -382,7 +383,7 @@ fn remove_gauge(corr: &mut [[f64; 3]], used: &[(usize, [f64; 2])], cfg: &AlignCo
     let (mut m, mut rhs) = ([0.0f64; 6], [0.0f64; 3]);
     for &(k, o) in used {
         let g = [1.0, o[0] - o0[0], o[1] - o0[1]];
-        accumulate(&mut m, &mut rhs, g, wa, corr[k][0]);
+        accumulate3(&mut m, &mut rhs, g, wa, corr[k][0]);
         m[3] += ws;
         m[5] += ws;
         rhs[1] += ws * corr[k][1];
@@ -398,19 +399,6 @@ fn remove_gauge(corr: &mut [[f64; 3]], used: &[(usize, [f64; 2])], cfg: &AlignCo
     }
 }
 
-/// Adds the weighted observation `y ≈ g · x` to normal equations kept as the upper
-/// triangle of the symmetric matrix (row-major) and the right-hand side.
-fn accumulate(m: &mut [f64; 6], rhs: &mut [f64; 3], g: [f64; 3], w: f64, y: f64) {
-    let mut k = 0;
-    for p in 0..3 {
-        for q in p..3 {
-            m[k] += w * g[p] * g[q];
-            k += 1;
-        }
-        rhs[p] += w * g[p] * y;
-    }
-}
-
 /// The world xy origin of each sweep that has returns, with its frame index.
 fn sweep_origins(returns: &GroundReturns, frames: usize) -> Vec<(usize, [f64; 2])> {
     returns
@@ -420,21 +408,6 @@ fn sweep_origins(returns: &GroundReturns, frames: usize) -> Vec<(usize, [f64; 2]
         .enumerate()
         .filter_map(|(k, o)| o.map(|o| (k, [o[0], o[1]])))
         .collect()
-}
-
-/// Solves the symmetric 3×3 system stored as its upper triangle (row-major), when
-/// its first diagonal entry (the weight of the data) reaches `min_weight`.
-fn solve3(m: &[f64; 6], b: &[f64; 3], min_weight: f64) -> Option<[f64; 3]> {
-    let a = DMat3::from_cols(
-        DVec3::new(m[0], m[1], m[2]),
-        DVec3::new(m[1], m[3], m[4]),
-        DVec3::new(m[2], m[4], m[5]),
-    );
-    if m[0] < min_weight || a.determinant().abs() < 1e-9 * m[0].powi(3).max(1.0) {
-        return None;
-    }
-    let x = a.inverse() * DVec3::from_array(*b);
-    Some(x.to_array())
 }
 
 /// The consensus raster: returns grouped by cell, with the cells that enough sweeps see.

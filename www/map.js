@@ -233,7 +233,10 @@ function showMetrics(report) {
   const el = $('metrics');
   if (!m) { el.textContent = `No ground truth or LiDAR in this bundle: no metrics.${aligned}`; return; }
   const f = (v, d, u) => (v === null || v === undefined ? '–' : `${v.toFixed(d)}${u}`);
-  el.textContent = `PSNR ${f(m.psnr_db, 2, ' dB')} · mIoU ${f(m.miou, 3, '')} · elevation RMSE ${f(m.elevation_rmse_m * 100, 1, ' cm')}.${aligned}`;
+  // The poses' shared offset and tilt move the whole map and no input sees them.
+  const d = m.elevation_datum;
+  const datum = d ? ` (${f(d.rmse_m * 100, 1, ' cm')} without the poses' shared offset and tilt)` : '';
+  el.textContent = `PSNR ${f(m.psnr_db, 2, ' dB')} · mIoU ${f(m.miou, 3, '')} · elevation RMSE ${f(m.elevation_rmse_m * 100, 1, ' cm')}${datum}.${aligned}`;
 }
 
 function setLayer(name, px, w, h) {

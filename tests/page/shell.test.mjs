@@ -226,6 +226,10 @@ test('the map is trained tile by tile in the page; a tile the machine fails is t
   assert.ok(r.tiles.filter((t) => t.steps > 0).length > 1, 'several tiles trained');
   assert.ok(r.seams.border_pairs > 0);
   assert.ok(r.metrics.psnr_db > 10, JSON.stringify(r.metrics));
+  // The elevation without the poses' shared offset and tilt, beside the absolute one.
+  const d = r.metrics.elevation_datum;
+  assert.ok(d && d.rmse_m <= r.metrics.elevation_rmse_m + 1e-9, JSON.stringify(r.metrics));
+  assert.match(await page.textContent('#metrics'), /cm without the poses' shared offset and tilt/);
   await page.screenshot({ path: path.join(shots, 'map-tiled.png'), fullPage: true });
   assert.deepEqual(errors, []);
   await page.close();

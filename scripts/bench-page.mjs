@@ -5,11 +5,16 @@
 // the run after that many steps (large bundles: time per step without a whole epoch).
 // With `--no-frame-exposure`, the page's "A gain per frame" is unticked. With `--segment MODEL.onnx`, masks are computed in the page first ("Compute masks
 // with a model…", TwinLiteNet's class map) and their time is printed as well.
+// The click waits for the page's GPU warm-up (the next run's device and pipelines,
+// made when the bundle is accepted), as a user who reads the summary first would;
+// `gpu_warm_s` is its length. With `--cold`, the click comes at once.
 import { openBench } from './bench-browser.mjs';
 
 const args = process.argv.slice(2);
 const noGains = args.indexOf('--no-frame-exposure');
 if (noGains >= 0) args.splice(noGains, 1);
+const coldAt = args.indexOf('--cold');
+if (coldAt >= 0) args.splice(coldAt, 1);
 const seg = args.indexOf('--segment');
 const model = seg >= 0 ? args.splice(seg, 2)[1] : null;
 const [bundle, resolution = '0.1', maxSteps] = args;
@@ -35,6 +40,11 @@ try {
     await page.evaluate(() => { document.getElementById('advanced').open = true; });
     await page.setChecked('#set-frame-exposure', false);
   }
+  let gpuWarmS = null;
+  if (coldAt < 0) {
+    await page.waitForFunction(() => document.body.dataset.gpuWarmS !== undefined, null, { timeout: 600_000, polling: 100 });
+    gpuWarmS = Number(await page.getAttribute('body', 'data-gpu-warm-s'));
+  }
   const t0 = Date.now();
   await page.click('#run');
   if (maxSteps) {
@@ -52,14 +62,14 @@ try {
   const perStep = Number((text.match(/([\d.]+) s per step/) || [])[1]);
   // Seconds from the click: the run started, trained, the map rendered, shown, and
   // its downloads made.
-  const stages = await page.evaluate(() => Object.fromEntries(['startS', 'trainedS', 'finishS', 'mapShownS', 'exportsS']
+  const stages = await page.evaluate(() => Object.fromEntries(['startS', 'trainedS', 'finishS', 'mapShownS', 'exportsS', 'previewS']
     .map((k) => [k.replace(/S$/, '_s'), Number(document.body.dataset[k])])));
   // The engine's own stage timings (report.json's).
   const timings = await page.evaluate(async () => {
     const a = [...document.querySelectorAll('#exports a')].find((x) => x.download === 'report.json');
     return a ? (await (await fetch(a.href)).json()).timings : null;
   });
-  console.log(JSON.stringify({ bundle, segment, resolution: Number(resolution), steps, seconds_per_step: perStep, total_s: total, click_to: stages, timings, status: await page.textContent('#status'), metrics: await page.textContent('#metrics') }, null, 2));
+  console.log(JSON.stringify({ bundle, segment, resolution: Number(resolution), gpu_warm_s: gpuWarmS, steps, seconds_per_step: perStep, total_s: total, click_to: stages, timings, status: await page.textContent('#status'), metrics: await page.textContent('#metrics') }, null, 2));
 } finally {
   await close();
 }

@@ -278,6 +278,9 @@ pub struct Timings {
     pub prepare_ms: f64,
     pub colour_ms: f64,
     pub gpu_setup_ms: f64,
+    /// Compute pipelines the GPU set-up compiled: none on a device warmed for the
+    /// run (the page's `warm_gpu`), where compiling is most of `gpu_setup_ms`.
+    pub gpu_setup_pipelines: usize,
     pub train_ms: f64,
     /// Of `train_ms`: reading, decoding and packing the steps' target images.
     pub target_ms: f64,
@@ -495,6 +498,7 @@ impl Session {
         if train.frame_exposure {
             train.lr.exposure = 0.0;
         }
+        let compiled = ctx.pipelines_compiled();
         let trainer = Trainer::new(
             ctx,
             &start,
@@ -506,6 +510,7 @@ impl Session {
         )
         .await?;
         timings.gpu_setup_ms = t.elapsed().as_secs_f64() * 1e3;
+        timings.gpu_setup_pipelines = trainer.ctx.pipelines_compiled() - compiled;
         Ok(Self {
             bytes_per_surfel_gpu: trainer.bytes_per_surfel(),
             with_lidar: reg.with_lidar,

@@ -182,6 +182,31 @@ fn a_height_offset_shared_by_every_pose_is_the_maps_datum_and_nothing_else() {
     assert!(m.elevation_rmse_m.unwrap() > LIFT * 0.9, "{m:?}");
 }
 
+/// The page warms the next run's device while its user reads the summary
+/// (`warm_gpu`): a session set up on a device warmed for its channel count compiles
+/// no pipeline (SwiftShader spends 4–5 s on them), one on a fresh device all of them.
+#[test]
+fn a_session_on_a_warmed_device_compiles_no_pipeline() {
+    let mut b = demo_bundle();
+    let mut cfg = ReconstructConfig::default();
+    cfg.prepare.grid.half_width = 4.0;
+    cfg.prepare.grid.resolution = 0.1;
+    let cold = pollster::block_on(Session::new(&mut b, cfg.clone(), ctx())).expect("session");
+    let n = cold.timings.gpu_setup_pipelines;
+    eprintln!("a fresh device compiled {n} pipelines");
+    assert!(n >= 20, "a fresh device compiled {n} pipelines");
+    let warm = ctx();
+    let channels = b.manifest.classes().len() as u32;
+    pollster::block_on(rogs::optim::train::warm_up(&warm, channels)).expect("warm-up");
+    assert_eq!(
+        warm.pipelines_compiled(),
+        n,
+        "the warm-up compiles what a set-up does"
+    );
+    let s = pollster::block_on(Session::new(&mut b, cfg, warm)).expect("session");
+    assert_eq!(s.timings.gpu_setup_pipelines, 0);
+}
+
 /// A drive without masks (the demo with its labels withheld, LiDAR kept): the road
 /// plane below each camera's horizon is supervised, the map beats its own IPM start
 /// and has no semantic layer. Measured (10 cm, 4 m corridor, release): 24.0 dB and

@@ -183,7 +183,7 @@ function accept(r, drive, add) {
     }
     showDrives();
     // A drive without labels' map has no classes to show (its table, if any, is the truth's).
-    offerOptimisation(drives, r.summary.labelled ? r.summary.classes : []);
+    offerOptimisation(drives, r.summary.labelled ? r.summary.classes : [], r.summary.channels);
     document.body.dataset.drives = String(drives.length);
     document.body.dataset.lazy = String(drives.some((d) => d.lazy));
     const how = drive.lazy ? ` It is read lazily: ${(drive.lazy.size / 1048576).toFixed(1)} MiB on disk, a tile's files at a time in memory.` : '';

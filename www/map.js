@@ -1,7 +1,7 @@
 // The optimisation panel and the map viewer: runs the engine step by step (yielding
 // to the browser between steps so the page stays responsive), then shows the BEV
 // layers on a canvas with pan, zoom, visibility and opacity, and offers the exports.
-import { start_reconstruction, start_reconstruction_drives, start_reconstruction_lazy } from './pkg/rogs.js';
+import { start_reconstruction, start_reconstruction_drives, start_reconstruction_lazy, warm_gpu } from './pkg/rogs.js';
 import { openLazyBundle, readerOf } from './bundle.js';
 import { blobSource } from './zip.js';
 import { createGpuView } from './gpu-view.js';
@@ -35,11 +35,31 @@ function revokeExports() {
 }
 const view = { scale: 1, x: 0, y: 0, layers: {} };
 
-export function offerOptimisation(list, bundleClasses) {
+export function offerOptimisation(list, bundleClasses, channels) {
   drives = list;
   classes = bundleClasses || [];
   $('optimise').hidden = false;
   $('run').disabled = false;
+  if ('gpu' in navigator) warmGpu(channels || 1);
+}
+
+// The next run's GPU device with its pipelines compiled (`warm_gpu`), begun when a
+// bundle is accepted and after each run: SwiftShader takes seconds over them, which
+// pass while the user reads the summary instead of after the click. `gpuWarmS` on
+// <body>: seconds the warm-up took.
+let warm = null; // { channels, done: Promise }
+function warmGpu(channels) {
+  if (warm?.channels === channels) return;
+  const t0 = performance.now();
+  delete document.body.dataset.gpuWarmS;
+  warm = {
+    channels,
+    done: warm_gpu(channels).then(
+      () => { document.body.dataset.gpuWarmS = ((performance.now() - t0) / 1000).toFixed(2); },
+      // A run without it makes its own device and says what is wrong with it.
+      () => {},
+    ),
+  };
 }
 
 function settings() {
@@ -108,13 +128,17 @@ async function optimise(setStatus) {
   // Seconds from the click to each stage, on the page's body for benchmarks.
   const tClick = performance.now();
   const mark = (k) => { document.body.dataset[k] = ((performance.now() - tClick) / 1000).toFixed(2); };
-  for (const k of ['startS', 'trainedS', 'finishS', 'mapShownS', 'exportsS']) delete document.body.dataset[k];
+  for (const k of ['startS', 'trainedS', 'finishS', 'mapShownS', 'exportsS', 'previewS', 'previews']) delete document.body.dataset[k];
   $('run').disabled = true;
   $('pause').disabled = false;
   $('stop').disabled = false;
   $('viewer').hidden = true;
   setStatus('Preparing surfels on the GPU…');
   let rec;
+  // The warm device goes to this run; the next run's is warmed after it.
+  if (warm) await warm.done;
+  const channels = warm?.channels;
+  warm = null;
   try {
     if (drives.some((d) => d.lazy)) {
       // One lazily read drive makes every drive of the map read so.
@@ -129,6 +153,7 @@ async function optimise(setStatus) {
   } catch (e) {
     setStatus(`Could not start: ${e}`, 'error');
     $('run').disabled = false;
+    if (channels) warmGpu(channels);
     return;
   }
   // The previous run's engine state (its surfels, GPU buffers and files) goes now:
@@ -198,6 +223,8 @@ async function optimise(setStatus) {
         document.body.dataset.previews = String(Number(document.body.dataset.previews || 0) + 1);
       } catch (e) { /* a failed preview leaves the last one; the final map follows */ }
       lastPreview = performance.now();
+      // Seconds spent on previews, on <body> for benchmarks.
+      document.body.dataset.previewS = (Number(document.body.dataset.previewS || 0) + (lastPreview - p0) / 1000).toFixed(2);
       previewGap = Math.max(4000, 5 * (lastPreview - p0));
     }
     // Yield so the page repaints and the buttons respond.
@@ -220,6 +247,7 @@ async function optimise(setStatus) {
   }
   runsDone += 1;
   document.body.dataset.runs = String(runsDone);
+  if (channels) warmGpu(channels);
   if (engineMemory) document.body.dataset.wasmBytes = String(engineMemory.buffer.byteLength);
   $('run').disabled = false;
 }

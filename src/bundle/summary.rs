@@ -15,6 +15,9 @@ pub struct Summary {
     pub classes: Vec<ClassSummary>,
     /// Whether the views carry label images (false: a drive without masks).
     pub labelled: bool,
+    /// Logit channels a map of this bundle has: one per class, one (the road
+    /// surface) without labels.
+    pub channels: usize,
     /// Total LiDAR points over all sweeps (0 without LiDAR).
     pub lidar_points: u64,
     pub lidar_sweeps: usize,
@@ -95,6 +98,7 @@ impl Summary {
                 })
                 .collect(),
             labelled: m.labelled(),
+            channels: m.classes().len().max(1),
             lidar_points,
             lidar_sweeps: sweeps.len(),
             ground_truth: m.ground_truth.as_ref().map(|g| GroundTruthSummary {

@@ -85,6 +85,7 @@ pub fn pipeline(
             cache: None,
         });
     super::timing::name(&p, label);
+    ctx.count_compiled(1);
     ctx.cache_pipeline(key, &p);
     p
 }

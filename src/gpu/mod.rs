@@ -128,6 +128,11 @@ pub struct GpuContext {
     /// of compiling them again (the page spends 4–5 s setting up the GPU for a run,
     /// mostly on them).
     pipelines: std::sync::Arc<std::sync::Mutex<PipelineCache>>,
+    /// The radix sort's kernels (their own layout keeps them out of `pipelines`),
+    /// kept with the pipelines and dropped with them (`start_tile`).
+    sorter: std::sync::Arc<std::sync::Mutex<Option<radix_sort::RadixSorter>>>,
+    /// Compute pipelines compiled on this device so far (cache misses).
+    compiled: std::sync::Arc<std::sync::atomic::AtomicUsize>,
 }
 
 /// Compute pipelines by (label, entry point, WGSL parts).
@@ -242,6 +247,8 @@ impl GpuContext {
             failure,
             lost,
             pipelines: Default::default(),
+            sorter: Default::default(),
+            compiled: Default::default(),
         })
     }
 
@@ -264,8 +271,37 @@ impl GpuContext {
     /// keeps them.
     pub fn start_tile(&self) {
         #[cfg(not(target_arch = "wasm32"))]
-        if let Ok(mut c) = self.pipelines.lock() {
-            c.clear();
+        {
+            if let Ok(mut c) = self.pipelines.lock() {
+                c.clear();
+            }
+            if let Ok(mut s) = self.sorter.lock() {
+                *s = None;
+            }
+        }
+    }
+
+    /// Compute pipelines compiled on this device so far: a run's set-up on a
+    /// device warmed for it (`optim::train::warm_up`) adds none.
+    pub fn pipelines_compiled(&self) -> usize {
+        self.compiled.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// Counts `n` compiled pipelines.
+    pub(crate) fn count_compiled(&self, n: usize) {
+        self.compiled
+            .fetch_add(n, std::sync::atomic::Ordering::Relaxed);
+    }
+
+    /// The radix sorter made on this device, if any.
+    pub(crate) fn cached_sorter(&self) -> Option<radix_sort::RadixSorter> {
+        self.sorter.lock().ok()?.clone()
+    }
+
+    /// Keeps the radix sorter `s`.
+    pub(crate) fn cache_sorter(&self, s: &radix_sort::RadixSorter) {
+        if let Ok(mut slot) = self.sorter.lock() {
+            *slot = Some(s.clone());
         }
     }
 

@@ -76,7 +76,9 @@ impl SortScratch {
     }
 }
 
-/// Pipelines of the five kernels and the per-pass parameter table.
+/// Pipelines of the five kernels and the per-pass parameter table (cloning shares
+/// them: `GpuContext` keeps one per device).
+#[derive(Clone)]
 pub struct RadixSorter {
     layout: wgpu::BindGroupLayout,
     count: wgpu::ComputePipeline,
@@ -124,8 +126,12 @@ async fn check_scope(scope: wgpu::ErrorScopeGuard) -> Result<(), GpuError> {
 }
 
 impl RadixSorter {
-    /// Compiles the kernels; a shader or pipeline error is returned, not raised.
+    /// Compiles the kernels, once per device (`GpuContext`'s cache); a shader or
+    /// pipeline error is returned, not raised.
     pub async fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
+        if let Some(s) = ctx.cached_sorter() {
+            return Ok(s);
+        }
         let dev = &ctx.device;
         let scope = dev.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = ctx.shader(
@@ -188,6 +194,8 @@ impl RadixSorter {
             param_stride,
         };
         check_scope(scope).await?;
+        ctx.count_compiled(5);
+        ctx.cache_sorter(&sorter);
         Ok(sorter)
     }
 

@@ -353,6 +353,21 @@ fn grid_1d(ctx: &GpuContext, n: u32) -> ((u32, u32, u32), u32) {
     ((gx, gy, 1), gx * 256)
 }
 
+/// Compiles a run's training pipelines on `ctx` ahead of it, for a model of
+/// `channels` logit channels: the rasteriser's, the radix sort's and the trainer's.
+/// A trainer made later on the same device takes them from its cache instead of
+/// compiling them (the page does this while its user looks at a dropped bundle:
+/// SwiftShader takes 4–5 s over them). Resolves once the device has compiled them.
+pub async fn warm_up(ctx: &GpuContext, channels: u32) -> Result<(), GpuError> {
+    let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+    GpuRasterizer::new(ctx, channels.max(1)).await?;
+    Kernels::new(ctx);
+    match scope.pop().await {
+        Some(e) => Err(GpuError::Validation(e.to_string())),
+        None => Ok(()),
+    }
+}
+
 impl Trainer {
     #[allow(clippy::too_many_arguments)]
     pub async fn new(

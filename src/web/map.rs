@@ -111,6 +111,37 @@ pub async fn start_reconstruction_lazy(
     start(bundle, settings, Some((LazyFiles { stores }, reader))).await
 }
 
+thread_local! {
+    /// The device `warm_gpu` set up for the next run, its pipelines compiled.
+    static WARM: std::cell::RefCell<Option<GpuContext>> = const { std::cell::RefCell::new(None) };
+}
+
+/// Sets up a GPU device for the next run and compiles its training pipelines for
+/// a bundle of `channels` logit channels (the summary's `channels`), so that the
+/// run started next (`start_reconstruction*`) finds them compiled: the page calls
+/// it when a bundle is accepted, and SwiftShader's 4–5 s of compiling pass while
+/// its user looks at the summary and the settings. Resolves when they are
+/// compiled (the page waits for it before it starts a run). A bundle of other
+/// channels compiles the pipelines that differ when its run starts.
+#[wasm_bindgen]
+pub async fn warm_gpu(channels: u32) -> Result<(), JsValue> {
+    let ctx = GpuContext::new().await.map_err(err)?;
+    if let Err(e) = crate::optim::train::warm_up(&ctx, channels).await {
+        ctx.release();
+        return Err(err(e));
+    }
+    if let Some(old) = WARM.with(|w| w.borrow_mut().replace(ctx)) {
+        old.release();
+    }
+    Ok(())
+}
+
+/// The warm device, once (a lost one is dropped).
+fn take_warm() -> Option<GpuContext> {
+    WARM.with(|w| w.borrow_mut().take())
+        .filter(|c| !c.is_lost())
+}
+
 async fn start(
     mut bundle: Bundle,
     settings: JsValue,
@@ -135,7 +166,10 @@ async fn start(
             tiling = Some(TileConfig::default());
         }
     }
-    let ctx = GpuContext::new().await.map_err(err)?;
+    let ctx = match take_warm() {
+        Some(c) => c,
+        None => GpuContext::new().await.map_err(err)?,
+    };
     let run = match &lazy {
         Some((files, reader)) => {
             let mut f = super::lazy::fetcher(reader.clone());

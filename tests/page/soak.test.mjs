@@ -19,6 +19,9 @@ test('ten reconstructions in one page hold no more wasm or GPU memory than the s
     await page.click('#run');
     await page.waitForSelector(`body[data-runs="${i}"]`, { timeout: 120_000 });
     assert.match(await page.textContent('#status'), /Map ready/);
+    // The next run's device, warmed after each run, is held as well (its pipelines
+    // and a few small buffers).
+    await page.waitForFunction(() => document.body.dataset.gpuWarmS !== undefined, null, { timeout: 60_000 });
     rows.push(await page.evaluate(() => ({
       wasm: Number(document.body.dataset.wasmBytes),
       gpu: window.gpuLiveBytes(),

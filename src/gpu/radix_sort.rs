@@ -164,6 +164,7 @@ impl RadixSorter {
             immediate_size: 0,
         });
         let pipeline = |entry: &str| {
+            ctx.count_compiled(1);
             dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                 label: Some(entry),
                 layout: Some(&pipeline_layout),
@@ -194,7 +195,6 @@ impl RadixSorter {
             param_stride,
         };
         check_scope(scope).await?;
-        ctx.count_compiled(5);
         ctx.cache_sorter(&sorter);
         Ok(sorter)
     }
